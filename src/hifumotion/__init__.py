@@ -1,0 +1,32 @@
+"""hifumotion: keep a HIFU focus on a target tissue that moves and deforms.
+
+The package follows Liao et al., "Modeling and Predicting Tissue Movement and
+Deformation for HIFU Therapy" (PLoS ONE): segment the target in B-mode images
+with level sets, reconstruct a 3D tissue model, simulate tissue, water and a
+pushing bar with a particle framework, estimate the unknown parameters from
+training frames and predict the contours of later frames.
+
+Units: millimetres and seconds at every public interface; SI inside the
+physics kernels. Each quantity's unit is in its name or its docstring.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("hifumotion")
+except PackageNotFoundError:  # running from a source tree that was not installed
+    __version__ = "0.0.0+unknown"
+
+from hifumotion.errors import HifuError, InputError  # noqa: E402
+from hifumotion.sequence import ImageSequence  # noqa: E402
+from hifumotion.contour import Contour, Ellipse, ClickedPoints  # noqa: E402
+
+__all__ = [
+    "__version__",
+    "HifuError",
+    "InputError",
+    "ImageSequence",
+    "Contour",
+    "Ellipse",
+    "ClickedPoints",
+]

@@ -1,0 +1,5 @@
+"""``python -m hifumotion`` runs the command line."""
+
+from hifumotion.cli import main
+
+main()

@@ -1,0 +1,119 @@
+"""Configuration files: pydantic models loaded from TOML or YAML.
+
+Each stage's settings are a :class:`ConfigModel`; every field documents its
+unit. :func:`load_config` reads a file into a model and turns validation
+failures into one :class:`~hifumotion.errors.InputError` naming the file and
+the field.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal, TypeVar
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from hifumotion.errors import InputError
+
+M = TypeVar("M", bound=BaseModel)
+
+
+class ConfigModel(BaseModel):
+    """Base of every configuration model: unknown keys are errors, values are validated on assignment."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class ReadOptions(ConfigModel):
+    """How to read a user's image file."""
+
+    path: Path = Field(description="image file or folder (PNG/JPEG/TIFF, DICOM, NIfTI/MHA/NRRD, video)")
+    spacing_mm: float | tuple[float, float] | None = Field(
+        default=None, description="pixel size in mm, scalar or (row, col); overrides the file (needed for PNG, video)"
+    )
+    frame_interval_s: float | None = Field(default=None, gt=0, description="time between frames in seconds; overrides the file")
+    kind: Literal["auto", "cine", "sweep"] = Field(default="auto", description="how to read the third axis of a 3D volume file")
+
+    @field_validator("spacing_mm")
+    @classmethod
+    def _positive_spacing(cls, v):
+        if v is None:
+            return v
+        values = (v, v) if isinstance(v, (int, float)) else v
+        if any(x <= 0 for x in values):
+            raise ValueError("pixel sizes must be positive (mm)")
+        return v
+
+
+def read_config_file(path: str | Path) -> dict[str, Any]:
+    """The raw mapping in a ``.toml``, ``.yaml`` or ``.yml`` file."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("no such configuration file", p)
+    suffix = p.suffix.lower()
+    try:
+        if suffix == ".toml":
+            data = tomllib.loads(p.read_text(encoding="utf-8"))
+        elif suffix in (".yaml", ".yml"):
+            data = yaml.safe_load(p.read_text(encoding="utf-8")) or {}
+        else:
+            raise InputError(f"unsupported configuration format '{suffix}'; expected .toml, .yaml or .yml", p)
+    except (tomllib.TOMLDecodeError, yaml.YAMLError) as exc:
+        raise InputError(f"cannot parse ({' '.join(str(exc).split())})", p) from None
+    if not isinstance(data, dict):
+        raise InputError("expected a table of settings at the top level", p)
+    return data
+
+
+def validate_config(model: type[M], data: dict[str, Any], source: str | Path = "config") -> M:
+    """``model`` built from ``data``; a validation error becomes one line naming the field."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        more = f" (and {exc.error_count() - 1} more problem(s))" if exc.error_count() > 1 else ""
+        raise InputError(f"field '{where}': {err['msg']}{more}", source) from None
+
+
+def load_config(path: str | Path, model: type[M]) -> M:
+    """Read a TOML/YAML file into ``model``; relative paths in it stay relative to the caller."""
+    return validate_config(model, read_config_file(path), path)
+
+
+def dump_toml(model: BaseModel) -> str:
+    """A model as TOML text, each field preceded by its description as a comment."""
+    lines: list[str] = []
+    _dump_table(model, [], lines)
+    return "\n".join(lines).strip() + "\n"
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _dump_table(model: BaseModel, prefix: list[str], lines: list[str]) -> None:
+    nested = []
+    for name, info in type(model).model_fields.items():
+        value = getattr(model, name)
+        if isinstance(value, BaseModel):
+            nested.append((name, value))
+            continue
+        if info.description:
+            lines.append(f"# {info.description}")
+        if value is None:
+            lines.append(f"# {name} = (not set)")
+        else:
+            lines.append(f"{name} = {_toml_value(value.value if hasattr(value, 'value') else value)}")
+    for name, value in nested:
+        lines.append("")
+        lines.append(f"[{'.'.join(prefix + [name])}]")
+        _dump_table(value, prefix + [name], lines)

@@ -1,0 +1,47 @@
+"""Terminal output: logging levels, messages and progress bars (rich), silenced by ``-q``."""
+
+from __future__ import annotations
+
+import logging
+from typing import Iterable, Iterator, TypeVar
+
+from rich.console import Console
+from rich.logging import RichHandler
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+T = TypeVar("T")
+
+#: Messages and progress go to standard error, so standard output stays clean for ``--json``.
+console = Console(stderr=True)
+log = logging.getLogger("hifumotion")
+_quiet = False
+
+
+def setup(verbosity: int = 0, quiet: bool = False) -> None:
+    """Configure logging: ``-q`` errors only and no progress bars, default info, ``-v`` debug."""
+    global _quiet
+    _quiet = quiet
+    level = logging.ERROR if quiet else (logging.DEBUG if verbosity > 0 else logging.INFO)
+    log.handlers.clear()
+    handler = RichHandler(console=console, show_time=False, show_path=verbosity > 0, markup=False)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log.addHandler(handler)
+    log.setLevel(level)
+    log.propagate = False
+
+
+def is_quiet() -> bool:
+    return _quiet
+
+
+def track(items: Iterable[T], description: str, total: int | None = None) -> Iterator[T]:
+    """Iterate with a progress bar on standard error (none with ``-q`` or when not a terminal)."""
+    if _quiet or not console.is_terminal:
+        yield from items
+        return
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=console, transient=False) as progress:
+        task = progress.add_task(description, total=total if total is not None else (len(items) if hasattr(items, "__len__") else None))
+        for item in items:
+            yield item
+            progress.advance(task)

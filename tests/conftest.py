@@ -1,0 +1,24 @@
+"""Shared fixtures. Tests that use ``../shared/data`` skip cleanly when it is absent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture
+def shared_data() -> Path:
+    if not (SHARED_DATA / "ddti" / "init.json").is_file():
+        pytest.skip("../shared/data is not present")
+    return SHARED_DATA
+
+
+def disc(shape: tuple[int, int], cx: float, cy: float, r: float) -> np.ndarray:
+    """Pixels whose centre is within ``r`` of ``(cx, cy)`` (x = column, y = row)."""
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
+    return (cols - cx) ** 2 + (rows - cy) ** 2 <= r**2

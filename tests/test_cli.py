@@ -1,0 +1,70 @@
+"""The command line as a user runs it: a real process, its exit code and what it prints."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import imageio.v3 as iio
+import numpy as np
+import pydicom
+import pytest
+
+import hifumotion
+
+
+def run(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "hifumotion", *args], capture_output=True, text=True, cwd=cwd, timeout=120)
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("error:") and "Traceback" not in proc.stderr
+    for f in fragments:
+        assert f in lines[0]
+
+
+def test_help_and_version():
+    proc = run("--help")
+    assert proc.returncode == 0 and "info" in proc.stdout
+    proc = run("--version")
+    assert proc.returncode == 0 and proc.stdout.strip() == f"hifumotion {hifumotion.__version__}"
+
+
+def test_info_json_reports_what_was_read(tmp_path):
+    iio.imwrite(tmp_path / "f_1.png", np.zeros((30, 40), np.uint8))
+    iio.imwrite(tmp_path / "f_2.png", np.full((30, 40), 255, np.uint8))
+    proc = run("info", str(tmp_path), "--spacing", "0.2,0.25", "--frame-interval", "0.05", "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["frames"] == 2 and out["height_px"] == 30 and out["width_px"] == 40
+    assert out["spacing_mm"] == [0.2, 0.25] and out["frame_interval_s"] == 0.05 and out["kind"] == "cine"
+
+
+def test_user_errors_are_one_line_with_exit_code_2(tmp_path):
+    assert_one_line_error(run("info", str(tmp_path / "missing.dcm")), "missing.dcm", "no such file")
+    (tmp_path / "corrupt.png").write_bytes(b"\x89PNG garbage")
+    assert_one_line_error(run("info", str(tmp_path / "corrupt.png")), "corrupt.png", "cannot read")
+    (tmp_path / "data.xyz").write_text("x")
+    assert_one_line_error(run("info", str(tmp_path / "data.xyz")), "unsupported format")
+    iio.imwrite(tmp_path / "ok.png", np.zeros((4, 4), np.uint8))
+    assert_one_line_error(run("info", str(tmp_path / "ok.png"), "--spacing", "-0.1"), "--spacing", "positive")
+    ds = pydicom.Dataset()
+    ds.file_meta = pydicom.dataset.FileMetaDataset()
+    ds.file_meta.TransferSyntaxUID = pydicom.uid.ExplicitVRLittleEndian
+    ds.file_meta.MediaStorageSOPClassUID = "1.2.840.10008.5.1.4.1.1.6.1"
+    ds.file_meta.MediaStorageSOPInstanceUID = pydicom.uid.generate_uid()
+    ds.Modality = "US"
+    ds.save_as(tmp_path / "nopixels.dcm", enforce_file_format=True)
+    assert_one_line_error(run("info", str(tmp_path / "nopixels.dcm")), "nopixels.dcm", "no pixel data")
+
+
+def test_demo_refuses_an_existing_output_folder(tmp_path, shared_data):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("precious")
+    assert_one_line_error(run("demo", "-o", str(out), "--dataset", str(shared_data / "ddti")), "--overwrite")
+    assert (out / "keep.txt").read_text() == "precious"

@@ -1,0 +1,316 @@
+"""Readers and writers: real files written by the libraries themselves, read back."""
+
+from __future__ import annotations
+
+import numpy as np
+import pydicom
+import pytest
+import SimpleITK as sitk
+import tifffile
+import imageio.v3 as iio
+from pydicom.dataset import Dataset, FileMetaDataset
+from pydicom.sequence import Sequence as DicomSequence
+from pydicom.uid import ExplicitVRLittleEndian, generate_uid
+
+from hifumotion.contour import Contour
+from hifumotion.errors import InputError, OutputExistsError
+from hifumotion.io import (
+    output_folder,
+    read_contours_csv,
+    read_mask,
+    read_sequence,
+    write_contours_csv,
+    write_contours_json,
+    write_mask_png,
+    write_masks_nifti,
+    write_png_stack,
+    write_sequence_nifti,
+)
+from hifumotion.sequence import ImageSequence
+
+US_MULTIFRAME = "1.2.840.10008.5.1.4.1.1.3.1"
+US_IMAGE = "1.2.840.10008.5.1.4.1.1.6.1"
+
+
+def ramp(t: int = 3, h: int = 32, w: int = 48) -> np.ndarray:
+    """Distinct, smooth uint8 frames: each frame a gradient plus its index."""
+    rows, cols = np.mgrid[0:h, 0:w]
+    return np.stack([(rows * 3 + cols * 2 + 20 * k) % 256 for k in range(t)]).astype(np.uint8)
+
+
+def dicom_dataset(pixels: np.ndarray, sop_class: str = US_MULTIFRAME, **attrs) -> Dataset:
+    ds = Dataset()
+    ds.file_meta = FileMetaDataset()
+    ds.file_meta.MediaStorageSOPClassUID = sop_class
+    ds.file_meta.MediaStorageSOPInstanceUID = generate_uid()
+    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds.SOPClassUID = sop_class
+    ds.SOPInstanceUID = ds.file_meta.MediaStorageSOPInstanceUID
+    ds.Modality = "US"
+    colour = pixels.shape[-1] == 3 and pixels.ndim in (3, 4) and attrs.pop("colour", False)
+    frames = pixels.shape[0] if pixels.ndim == (4 if colour else 3) else 1
+    ds.Rows, ds.Columns = pixels.shape[-3:-1] if colour else pixels.shape[-2:]
+    ds.SamplesPerPixel = 3 if colour else 1
+    ds.PhotometricInterpretation = "RGB" if colour else "MONOCHROME2"
+    if colour:
+        ds.PlanarConfiguration = 0
+    ds.BitsAllocated = ds.BitsStored = 8
+    ds.HighBit = 7
+    ds.PixelRepresentation = 0
+    if frames > 1:
+        ds.NumberOfFrames = frames
+    for k, v in attrs.items():
+        setattr(ds, k, v)
+    ds.PixelData = np.ascontiguousarray(pixels).tobytes()
+    return ds
+
+
+def us_region(dx_cm: float, dy_cm: float, h: int, w: int) -> Dataset:
+    r = Dataset()
+    r.RegionSpatialFormat = 1
+    r.RegionDataType = 1
+    r.RegionLocationMinX0, r.RegionLocationMinY0 = 0, 0
+    r.RegionLocationMaxX1, r.RegionLocationMaxY1 = w - 1, h - 1
+    r.PhysicalUnitsXDirection = 3
+    r.PhysicalUnitsYDirection = 3
+    r.PhysicalDeltaX, r.PhysicalDeltaY = dx_cm, dy_cm
+    return r
+
+
+# --- raster images --------------------------------------------------------------------------
+
+
+def test_png_single_image_keeps_grey_levels(tmp_path):
+    img = ramp(1)[0]
+    iio.imwrite(tmp_path / "a.png", img)
+    seq = read_sequence(tmp_path / "a.png", spacing_mm=0.3)
+    assert seq.frames.shape == (1, 32, 48) and seq.frames.dtype == np.float32
+    assert np.array_equal(np.rint(seq.frames[0] * 255).astype(np.uint8), img)
+    assert seq.spacing_mm == (0.3, 0.3) and seq.spacing_known and seq.kind == "image"
+
+
+def test_png_without_spacing_is_flagged_unknown(tmp_path):
+    iio.imwrite(tmp_path / "a.png", ramp(1)[0])
+    seq = read_sequence(tmp_path / "a.png")
+    assert seq.spacing_mm == (1.0, 1.0) and not seq.spacing_known
+
+
+def test_rgb_png_of_grey_content_reads_as_grey(tmp_path):
+    img = ramp(1)[0]
+    iio.imwrite(tmp_path / "c.png", np.repeat(img[..., None], 3, axis=-1))
+    seq = read_sequence(tmp_path / "c.png")
+    assert np.array_equal(np.rint(seq.frames[0] * 255).astype(np.uint8), img)
+
+
+def test_folder_of_frames_in_natural_order(tmp_path):
+    for k in (10, 2, 1):
+        iio.imwrite(tmp_path / f"frame_{k}.png", np.full((8, 9), k * 10, np.uint8))
+    seq = read_sequence(tmp_path, spacing_mm=(0.2, 0.25), frame_interval_s=0.1)
+    assert np.allclose(seq.frames[:, 0, 0] * 255, [10, 20, 100])
+    assert seq.kind == "cine" and seq.frame_interval_s == 0.1 and seq.spacing_mm == (0.2, 0.25)
+
+
+def test_multipage_tiff_uint16(tmp_path):
+    stack = (ramp(4).astype(np.uint16) * 200 + 1000)
+    tifffile.imwrite(tmp_path / "s.tif", stack, photometric="minisblack")
+    seq = read_sequence(tmp_path / "s.tif")
+    assert seq.n_frames == 4
+    # one min-max scale for the whole stack keeps the frames comparable
+    restored = seq.frames * (stack.max() - stack.min()) + stack.min()
+    assert np.allclose(restored, stack, atol=0.1)
+
+
+def test_rgb_tiff_becomes_grey(tmp_path):
+    grey = ramp(1)[0]
+    tifffile.imwrite(tmp_path / "rgb.tif", np.repeat(grey[..., None], 3, -1), photometric="rgb")
+    seq = read_sequence(tmp_path / "rgb.tif")
+    assert seq.n_frames == 1 and np.array_equal(np.rint(seq.frames[0] * 255).astype(np.uint8), grey)
+
+
+# --- DICOM ----------------------------------------------------------------------------------
+
+
+def test_ultrasound_multiframe_dicom_spacing_and_frame_time(tmp_path):
+    frames = ramp(5, 40, 60)
+    ds = dicom_dataset(frames, FrameTime="33.3", SequenceOfUltrasoundRegions=DicomSequence([us_region(0.02, 0.025, 40, 60)]))
+    path = tmp_path / "cine.dcm"
+    ds.save_as(path, enforce_file_format=True)
+    seq = read_sequence(path)
+    assert seq.n_frames == 5 and seq.shape == (40, 60)
+    assert seq.spacing_mm == pytest.approx((0.25, 0.2))  # cm → mm, (row, col) = (ΔY, ΔX)
+    assert seq.frame_interval_s == pytest.approx(0.0333)
+    assert seq.metadata["spacing_from"] == "SequenceOfUltrasoundRegions"
+    assert np.array_equal(np.rint(seq.frames * 255).astype(np.uint8), frames)
+
+
+def test_dicom_cine_rate_and_pixel_spacing(tmp_path):
+    ds = dicom_dataset(ramp(3), CineRate=25, PixelSpacing=[0.3, 0.4])
+    path = tmp_path / "cine_rate.dcm"
+    ds.save_as(path, enforce_file_format=True)
+    seq = read_sequence(path)
+    assert seq.frame_interval_s == pytest.approx(0.04)
+    assert seq.spacing_mm == pytest.approx((0.3, 0.4))
+
+
+def test_colour_ultrasound_dicom_becomes_grey(tmp_path):
+    grey = ramp(2)
+    rgb = np.repeat(grey[..., None], 3, axis=-1)
+    ds = dicom_dataset(rgb, colour=True, FrameTime="50")
+    path = tmp_path / "rgb.dcm"
+    ds.save_as(path, enforce_file_format=True)
+    seq = read_sequence(path)
+    assert np.array_equal(np.rint(seq.frames * 255).astype(np.uint8), grey)
+
+
+def test_dicom_without_pixel_data_is_a_clear_error(tmp_path):
+    ds = dicom_dataset(ramp(1)[0], US_IMAGE)
+    del ds.PixelData
+    path = tmp_path / "empty.dcm"
+    ds.save_as(path, enforce_file_format=True)
+    with pytest.raises(InputError, match="empty.dcm: DICOM has no pixel data"):
+        read_sequence(path)
+
+
+def test_dicom_folder_is_a_sweep_sorted_by_position(tmp_path):
+    z_mm = [4.0, 0.0, 6.0, 2.0]
+    for k, z in enumerate(z_mm):
+        ds = dicom_dataset(np.full((16, 20), int(z * 10), np.uint8), US_IMAGE, PixelSpacing=[0.5, 0.5],
+                           ImagePositionPatient=[0, 0, z], ImageOrientationPatient=[1, 0, 0, 0, 1, 0], InstanceNumber=k + 1)
+        ds.save_as(tmp_path / f"IM{k}", enforce_file_format=True)  # no suffix, found by the DICM marker
+    seq = read_sequence(tmp_path)
+    assert seq.kind == "sweep"
+    assert np.allclose(seq.slice_positions_mm, [0, 2, 4, 6])
+    assert np.allclose(seq.frames[:, 0, 0] * 255, [0, 20, 40, 60])
+
+
+# --- NIfTI, MHA, NRRD ------------------------------------------------------------------------
+
+
+def test_nifti_2d_plus_t(tmp_path):
+    frames = ramp(6)
+    image = sitk.GetImageFromArray(frames[:, None], isVector=False)  # (t, z=1, y, x)
+    image.SetSpacing((0.2, 0.3, 1.0, 0.1))
+    sitk.WriteImage(image, str(tmp_path / "cine.nii.gz"))
+    seq = read_sequence(tmp_path / "cine.nii.gz")
+    assert seq.kind == "cine" and seq.n_frames == 6
+    assert seq.frame_interval_s == pytest.approx(0.1)
+    assert seq.spacing_mm == pytest.approx((0.3, 0.2))
+    assert np.array_equal(np.rint(seq.frames * 255).astype(np.uint8), frames)
+
+
+def test_nifti_3d_is_a_sweep_with_positions(tmp_path):
+    image = sitk.GetImageFromArray(ramp(4))
+    image.SetSpacing((0.2, 0.3, 1.5))
+    image.SetOrigin((0.0, 0.0, 10.0))
+    sitk.WriteImage(image, str(tmp_path / "sweep.nii"))
+    seq = read_sequence(tmp_path / "sweep.nii")
+    assert seq.kind == "sweep"
+    assert np.allclose(seq.slice_positions_mm, [10.0, 11.5, 13.0, 14.5])
+
+
+@pytest.mark.parametrize("suffix", [".mha", ".nrrd"])
+def test_mha_and_nrrd_read_as_cine_when_asked(tmp_path, suffix):
+    image = sitk.GetImageFromArray(ramp(3))
+    image.SetSpacing((0.25, 0.25, 0.05))
+    sitk.WriteImage(image, str(tmp_path / f"v{suffix}"))
+    seq = read_sequence(tmp_path / f"v{suffix}", kind="cine")
+    assert seq.kind == "cine" and seq.frame_interval_s == pytest.approx(0.05)
+    assert seq.spacing_mm == pytest.approx((0.25, 0.25))
+
+
+# --- video -----------------------------------------------------------------------------------
+
+
+def test_mp4_frames_and_frame_rate(tmp_path):
+    rows, cols = np.mgrid[0:64, 0:80]
+    frames = np.stack([((np.sin(cols / 9 + k / 3) + 1) * 100 + 20) for k in range(10)]).astype(np.uint8)
+    iio.imwrite(tmp_path / "loop.mp4", np.repeat(frames[..., None], 3, -1), plugin="pyav", codec="libx264", fps=20)
+    seq = read_sequence(tmp_path / "loop.mp4", spacing_mm=0.2)
+    assert seq.n_frames == 10 and seq.shape == (64, 80)
+    assert seq.frame_interval_s == pytest.approx(0.05)
+    # lossy codec: grey levels agree on average within a few levels
+    assert np.abs(seq.frames * 255 - frames).mean() < 4.0
+
+
+# --- bad input -------------------------------------------------------------------------------
+
+
+def test_bad_inputs(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        read_sequence(tmp_path / "missing.png")
+    (tmp_path / "notes.xyz").write_text("hello")
+    with pytest.raises(InputError, match="unsupported format '.xyz'"):
+        read_sequence(tmp_path / "notes.xyz")
+    (tmp_path / "broken.png").write_bytes(b"not a png at all")
+    with pytest.raises(InputError, match="broken.png: cannot read"):
+        read_sequence(tmp_path / "broken.png")
+    (tmp_path / "broken.nii").write_bytes(b"\x00" * 40)
+    with pytest.raises(InputError, match="broken.nii"):
+        read_sequence(tmp_path / "broken.nii")
+    iio.imwrite(tmp_path / "ok.png", ramp(1)[0])
+    with pytest.raises(InputError, match="spacing_mm"):
+        read_sequence(tmp_path / "ok.png", spacing_mm=-0.2)
+
+
+# --- writers ---------------------------------------------------------------------------------
+
+
+def test_sequence_nifti_round_trip_keeps_geometry(tmp_path):
+    cine = ImageSequence.from_array(ramp(4), spacing_mm=(0.3, 0.2), frame_interval_s=0.1)
+    write_sequence_nifti(tmp_path / "c.nii.gz", cine)
+    back = read_sequence(tmp_path / "c.nii.gz")
+    assert back.kind == "cine" and back.frame_interval_s == pytest.approx(0.1)
+    assert back.spacing_mm == pytest.approx((0.3, 0.2))
+    assert np.allclose(back.frames, cine.frames, atol=0.5 / 255)
+
+    sweep = ImageSequence.from_array(ramp(3), spacing_mm=0.25, slice_positions_mm=[5.0, 6.0, 7.0])
+    write_sequence_nifti(tmp_path / "s.nii.gz", sweep)
+    back = read_sequence(tmp_path / "s.nii.gz")
+    assert np.allclose(back.slice_positions_mm, [5.0, 6.0, 7.0])
+
+
+def test_mask_writers(tmp_path):
+    mask = np.zeros((20, 30), bool)
+    mask[5:15, 8:20] = True
+    write_mask_png(tmp_path / "m.png", mask)
+    assert set(np.unique(iio.imread(tmp_path / "m.png"))) == {0, 255}
+    assert np.array_equal(read_mask(tmp_path / "m.png"), mask)
+    write_masks_nifti(tmp_path / "m.nii.gz", np.stack([mask, ~mask]), spacing_mm=0.5, frame_interval_s=0.1)
+    arr = sitk.GetArrayFromImage(sitk.ReadImage(str(tmp_path / "m.nii.gz")))
+    assert arr.shape == (2, 1, 20, 30) and set(np.unique(arr)) == {0, 1}
+    paths = write_png_stack(tmp_path / "stack", np.stack([mask, mask]))
+    assert [p.name for p in paths] == ["frame_0000.png", "frame_0001.png"]
+    empty = tmp_path / "empty.png"
+    write_mask_png(empty, np.zeros((5, 5), bool))
+    with pytest.raises(InputError, match="no foreground"):
+        read_mask(empty)
+
+
+def test_contours_csv_round_trip(tmp_path):
+    c = Contour(np.array([[1.5, 2.0], [10.25, 2.0], [10.25, 8.5], [1.5, 8.5]]), spacing_mm=(0.5, 0.25))
+    write_contours_csv(tmp_path / "c.csv", {20: c, 30: c})
+    back = read_contours_csv(tmp_path / "c.csv", spacing_mm=(0.5, 0.25))
+    assert set(back) == {"20", "30"}
+    assert np.allclose(back["20"].points_px, c.points_px)
+    assert np.allclose(back["30"].points_mm, c.points_mm)
+    write_contours_json(tmp_path / "c.json", [c])
+    assert '"area_mm2"' in (tmp_path / "c.json").read_text()
+
+
+def test_output_folder_never_clobbers(tmp_path):
+    target = tmp_path / "run"
+    with output_folder(target) as out:
+        (out / "result.txt").write_text("first")
+    assert (target / "result.txt").read_text() == "first"
+    with pytest.raises(OutputExistsError, match="--overwrite"):
+        with output_folder(target):
+            pass
+    with pytest.raises(RuntimeError):
+        with output_folder(target, overwrite=True) as out:
+            (out / "result.txt").write_text("half")
+            raise RuntimeError("the run failed")
+    assert (target / "result.txt").read_text() == "first"  # a failed run leaves the old results
+    with output_folder(target, overwrite=True) as out:
+        (out / "result.txt").write_text("second")
+    assert (target / "result.txt").read_text() == "second"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging folder left behind
