@@ -18,7 +18,6 @@ from typing import Any, Mapping
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from skimage.draw import polygon2mask
 from skimage.measure import find_contours
 
 from hifumotion.errors import InputError
@@ -140,8 +139,11 @@ class Contour:
         return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * a)
 
     def to_mask(self, shape: tuple[int, int]) -> np.ndarray:
-        """Rasterise: ``True`` for every pixel whose centre lies inside the polygon."""
-        return polygon2mask(tuple(int(s) for s in shape), self.points_px[:, ::-1])
+        """Rasterise: ``True`` for every pixel whose centre lies inside the polygon (even-odd rule)."""
+        from hifumotion.segmentation._kernels import fill_polygon
+
+        pts = self.points_px
+        return fill_polygon(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), int(shape[0]), int(shape[1]))
 
     def resampled(self, step_px: float = 1.0) -> "Contour":
         """The same closed curve with points every ``step_px`` pixels of arc length (linear)."""
