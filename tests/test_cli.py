@@ -68,3 +68,61 @@ def test_demo_refuses_an_existing_output_folder(tmp_path, shared_data):
     (out / "keep.txt").write_text("precious")
     assert_one_line_error(run("demo", "-o", str(out), "--dataset", str(shared_data / "ddti")), "--overwrite")
     assert (out / "keep.txt").read_text() == "precious"
+
+
+def make_dataset(root, n=2):
+    """A tiny dataset in the layout of ../shared/data: noisy bright discs with their masks."""
+    import json
+
+    (root / "images").mkdir(parents=True)
+    (root / "masks").mkdir()
+    rng = np.random.default_rng(0)
+    init = {}
+    rows, cols = np.mgrid[0:96, 0:112]
+    for k in range(n):
+        cx, cy, r = 54 + 3 * k, 48, 26
+        mask = (cols - cx) ** 2 + (rows - cy) ** 2 <= r * r
+        img = np.clip(np.where(mask, 170, 80) + 12 * rng.standard_normal(mask.shape), 0, 255).astype(np.uint8)
+        iio.imwrite(root / "images" / f"disc{k}.png", img)
+        iio.imwrite(root / "masks" / f"disc{k}.png", mask.astype(np.uint8) * 255)
+        init[f"disc{k}.png"] = {"ellipse": {"cx": cx, "cy": cy, "a": 20, "b": 19, "angle_deg": 0},
+                                "points": [[cx - 19, cy], [cx - 8, cy - 19], [cx + 12, cy - 17], [cx + 19, cy + 2],
+                                           [cx + 6, cy + 19], [cx - 14, cy + 14]]}
+    (root / "init.json").write_text(json.dumps(init))
+    return root
+
+
+def test_segment_command_writes_masks_contours_and_run_info(tmp_path):
+    data = make_dataset(tmp_path / "data", 1)
+    out = tmp_path / "seg"
+    proc = run("-q", "segment", str(data / "images" / "disc0.png"), "--init", str(data / "init.json"),
+               "--method", "glcv", "--spacing", "0.2", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    for name in ("masks/frame_0000.png", "masks.nii.gz", "contours.csv", "contours.json", "overlay.png",
+                 "segmentation.json", "run_info.json"):
+        assert (out / name).is_file(), name
+    truth = iio.imread(data / "masks" / "disc0.png") > 0
+    mask = iio.imread(out / "masks" / "frame_0000.png") > 0
+    assert 2 * (mask & truth).sum() / (mask.sum() + truth.sum()) > 0.95
+    info = json.loads((out / "run_info.json").read_text())
+    assert info["config"]["method"] == "glcv" and "segment" in info["timings_s"]
+
+
+def test_compare_command_reproduces_table2_layout(tmp_path):
+    data = make_dataset(tmp_path / "data", 2)
+    out = tmp_path / "cmp"
+    proc = run("-q", "compare", str(data), "--methods", "cv,glcv", "--init-kind", "both", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    for tag in ("_ellipse", "_points"):
+        for name in (f"comparison{tag}.csv", f"table2{tag}.md", f"figure2{tag}.png", f"figure3{tag}.png"):
+            assert (out / name).is_file(), name
+    table = (out / "table2_ellipse.md").read_text()
+    assert "**" in table and "| mean | DSC |" in table
+    csv_rows = (out / "comparison_points.csv").read_text().strip().splitlines()
+    assert len(csv_rows) == 1 + 2 * 2  # header + images x methods
+
+
+def test_segment_rejects_unknown_method(tmp_path):
+    data = make_dataset(tmp_path / "data", 1)
+    assert_one_line_error(run("segment", str(data / "images" / "disc0.png"), "--init", str(data / "init.json"),
+                              "--method", "snake", "-o", str(tmp_path / "x")), "unknown method")
