@@ -129,9 +129,9 @@ TRACK_ITERATIONS = 30
 def estimate_shift(previous: np.ndarray, current: np.ndarray, mask: np.ndarray, margin: int = 16) -> np.ndarray:
     """The target's translation ``(drow, dcol)`` in px from ``previous`` to ``current``.
 
-    Phase correlation (scikit-image, 1/4 px) of a window around the target's
-    mask grown by ``margin`` px, Hann-tapered, so the target's own speckle,
-    not the background's, sets the shift.
+    Phase correlation (scikit-image, whole pixels: the level set refines the
+    rest) of a window around the target's mask grown by ``margin`` px,
+    Hann-tapered, so the target's own speckle, not the background's, sets the shift.
     """
     from skimage.registration import phase_cross_correlation
 
@@ -144,18 +144,44 @@ def estimate_shift(previous: np.ndarray, current: np.ndarray, mask: np.ndarray, 
     taper = np.outer(np.hanning(r1 - r0), np.hanning(c1 - c0))
     a = (previous[r0:r1, c0:c1] - previous[r0:r1, c0:c1].mean()) * taper
     b = (current[r0:r1, c0:c1] - current[r0:r1, c0:c1].mean()) * taper
-    shift, _, _ = phase_cross_correlation(b, a, upsample_factor=4, normalization=None)
+    shift, _, _ = phase_cross_correlation(b, a, upsample_factor=1, normalization=None)
     limit = 0.25 * min(r1 - r0, c1 - c0)  # beyond this the correlation peak is not the target
     return np.asarray(shift, float) if np.all(np.abs(shift) <= limit) else np.zeros(2)
 
 
 def _shift_mask(mask: np.ndarray, shift: np.ndarray) -> np.ndarray:
-    if not np.any(np.abs(shift) > 0.1):
+    """``mask`` translated by a whole-pixel ``(drow, dcol)``; what leaves the image is lost."""
+    dr, dc = (int(round(v)) for v in shift)
+    if dr == 0 and dc == 0:
         return mask
-    from scipy import ndimage
-
-    moved = ndimage.shift(mask.astype(np.float32), shift, order=1, mode="constant") > 0.5
+    h, w = mask.shape
+    moved = np.zeros_like(mask)
+    moved[max(dr, 0) : h + min(dr, 0), max(dc, 0) : w + min(dc, 0)] = mask[max(-dr, 0) : h + min(-dr, 0),
+                                                                            max(-dc, 0) : w + min(-dc, 0)]
     return moved if moved.any() else mask
+
+
+def _segment_window(image: np.ndarray, start: np.ndarray, method: str, spacing, margin: int,
+                    params: dict) -> SegmentationResult:
+    """Segment only the window around ``start`` (grown by ``margin`` px) and place the result
+    back on the full grid: a frame of a cine loop costs what its target's neighbourhood costs."""
+    from dataclasses import replace
+
+    from hifumotion.segmentation.levelset import BAND
+
+    rows, cols = np.nonzero(start)
+    h, w = start.shape
+    r0, r1 = max(int(rows.min()) - margin, 0), min(int(rows.max()) + 1 + margin, h)
+    c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + 1 + margin, w)
+    part = segment(image[r0:r1, c0:c1], start[r0:r1, c0:c1], method, spacing, **params)
+    mask = np.zeros((h, w), bool)
+    mask[r0:r1, c0:c1] = part.mask
+    phi = np.full((h, w), -(BAND + 1.0), np.float32)
+    phi[r0:r1, c0:c1] = part.phi
+    contour = part.contour
+    if contour is not None:
+        contour = Contour(contour.points_px + np.array([c0, r0]), contour.spacing_mm)
+    return replace(part, mask=mask, phi=phi, contour=contour)
 
 
 def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | None = None, spacing=None,
@@ -165,7 +191,8 @@ def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | No
     The first frame starts from ``init``. Later frames start from the previous
     mask, at full resolution (the contour is already close), keep the first
     frame's scale parameters, and run at most :data:`TRACK_ITERATIONS`
-    iterations, so tracking costs a few milliseconds per frame. With
+    iterations on a window around the target, so tracking costs a few
+    milliseconds per frame. With
     ``predict_motion`` each frame starts from the previous mask moved by the
     target's translation between the frames (:func:`estimate_shift`), so the
     level set only has to follow the deformation.
@@ -205,7 +232,10 @@ def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | No
             extra.update({k: v for k, v in carried.items() if k not in params})
         if t > 0 and predict_motion:
             start = _shift_mask(start, estimate_shift(frames[t - 1], frames[t], start))
-        result = segment(frames[t], start, method, spacing, **extra)
+        if t > 0 and "radius" in carried:
+            result = _segment_window(frames[t], start, method, spacing, int(carried["radius"]) + 12, extra)
+        else:
+            result = segment(frames[t], start, method, spacing, **extra)
         results.append(result)
         if t == 0:
             # keep the scale of the first frame: a previous contour is no rough inside start

@@ -46,15 +46,16 @@ def default_iterations(radius_px: float) -> int:
     return int(min(max(200, np.ceil(1.5 * radius_px / 0.06)), 3000))
 
 
-def edge_indicator(image: np.ndarray, sigma_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def edge_indicator(image: np.ndarray, sigma_px: float, smoothed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``g = 1 / (1 + |∇(G_σ * I)|² / λ²)`` and its gradient ``(g, ∂g/∂x, ∂g/∂y)``.
 
     The papers write ``g = 1/(1 + |∇G_σ * I|²)``, whose value depends on the
     intensity scale. We divide the gradient by λ, the 90th percentile of
     ``|∇(G_σ * I)|`` over the image, so that g is the same for any brightness
     scale and image: g ≈ 0.5 on the image's strongest 10 % of edges.
+    ``smoothed`` passes ``G_σ * I`` when the caller already has it.
     """
-    smooth = ndimage.gaussian_filter(image, sigma_px, mode="nearest")
+    smooth = smoothed if smoothed is not None else ndimage.gaussian_filter(image, sigma_px, mode="nearest")
     gy, gx = np.gradient(smooth)
     mag2 = gx * gx + gy * gy
     lam2 = float(np.percentile(mag2, 90.0)) or 1e-12
@@ -99,6 +100,17 @@ class LocalStatistics:
             self.total[new[:, 0], new[:, 1]] = sums[:, 1]
             count = self.count[rows, cols]
         return count, self.total[rows, cols]
+
+    def region_force(self, phi: np.ndarray, band: np.ndarray, box, point_image: np.ndarray | None,
+                     scale: float, integral: bool, eps: float):
+        """LCV's region force at the band points (see :func:`_kernels.local_region_force`)."""
+        h, w = phi.shape
+        r = int(np.ceil(self.radius_px))
+        r0, r1 = max(box[0] - r, 0), min(box[1] + r, h)
+        c0, c1 = max(box[2] - r, 0), min(box[3] + r, w)
+        pim = self.image if point_image is None else point_image
+        return K.local_region_force(phi, self.image, pim, band, self.half_widths, r0, r1, c0, c1, self.prefix,
+                                    self.count, self.total, float(scale), float(eps), bool(integral))
 
     def local_means(self, phi: np.ndarray, image: np.ndarray, band: np.ndarray, box, eps: float,
                     with_delta: bool = True):

@@ -32,6 +32,8 @@ def interface_segments(phi, r0, r1, c0, c1):
     c1 = min(c1, w - 1)
     cap = 64
     out = np.empty((cap, 4))
+    segs = np.empty((2, 4))
+    pts = np.empty((2, 2))
     n = 0
     for i in range(max(r0, 0), r1):
         for j in range(max(c0, 0), c1):
@@ -51,7 +53,6 @@ def interface_segments(phi, r0, r1, c0, c1):
             by = float(i + 1)
             lx = float(j)
             ly = i + _cross(a, d) if (a > 0) != (d > 0) else 0.0
-            segs = np.empty((2, 4))
             k = 0
             if code == 5 or code == 10:  # saddle
                 centre = 0.25 * (a + b + c + d)
@@ -64,7 +65,6 @@ def interface_segments(phi, r0, r1, c0, c1):
                     segs[1, 0], segs[1, 1], segs[1, 2], segs[1, 3] = rx, ry, bx, by
                 k = 2
             else:
-                pts = np.empty((2, 2))
                 m = 0
                 if (a > 0) != (b > 0):
                     pts[m, 0], pts[m, 1] = tx, ty
@@ -91,19 +91,26 @@ def interface_segments(phi, r0, r1, c0, c1):
     return out[:n]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def redistance_box(phi, segments, width, r0, r1, c0, c1):
     """Replace ``phi`` in rows ``r0:r1``, cols ``c0:c1`` by the signed distance to ``segments``.
 
     The sign (``phi > 0`` inside) is kept; magnitudes become the exact distance to
-    the nearest segment where it is at most ``width`` px, else ``width + 1``.
+    the nearest segment where it is below ``width`` px, else ``width + 1``.
     Pixels outside the box are left unchanged (they are already clamped far values).
     """
     h, w = phi.shape
     r0, c0 = max(r0, 0), max(c0, 0)
     r1, c1 = min(r1, h), min(c1, w)
     far = width + 1.0
-    dist = np.full((r1 - r0, c1 - c0), width * width)
+    for i in range(r0, r1):
+        for j in range(c0, c1):
+            v = phi[i, j]
+            if v > 0:
+                phi[i, j] = far
+            else:
+                phi[i, j] = -far
+    limit2 = width * width
     for s in range(segments.shape[0]):
         x0, y0, x1, y1 = segments[s, 0], segments[s, 1], segments[s, 2], segments[s, 3]
         dx, dy = x1 - x0, y1 - y0
@@ -121,14 +128,13 @@ def redistance_box(phi, segments, width, r0, r1, c0, c1):
                 px = x0 + t * dx - j
                 py = y0 + t * dy - i
                 d2 = px * px + py * py
-                if d2 < dist[i - r0, j - c0]:
-                    dist[i - r0, j - c0] = d2
-    limit = width * width
-    for i in range(r0, r1):
-        for j in range(c0, c1):
-            d2 = dist[i - r0, j - c0]
-            v = np.sqrt(d2) if d2 < limit else far
-            phi[i, j] = v if phi[i, j] > 0 else -v
+                if d2 < limit2:
+                    cur = phi[i, j]
+                    a = abs(cur)
+                    if d2 < a * a:
+                        d = np.sqrt(d2)
+                        phi[i, j] = d if cur > 0 else -d
+    return phi
 
 
 # --------------------------------------------------------------------------- band and derivatives
@@ -246,13 +252,13 @@ def row_prefix(a, r0, r1, c0, c1):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def disk_sums(prefixes, band, hw, r0, c0, h, w):
     """Sums of several arrays over the disk around each band point, from their row prefix sums.
 
-    ``prefixes`` is ``(rows, cols + 1, K)`` for the box starting at ``(r0, c0)``
-    (see :func:`row_prefix`); the box must contain every disk (clipped to the
-    image ``h × w``). Returns ``(N, K)``.
+    ``prefixes`` is ``(rows, cols + 1, K)`` with K ≤ 4 for the box starting at
+    ``(r0, c0)`` (see :func:`row_prefix`); the box must contain every disk
+    (clipped to the image ``h × w``). Returns ``(N, K)``.
     """
     n = band.shape[0]
     kk = prefixes.shape[2]
@@ -262,12 +268,29 @@ def disk_sums(prefixes, band, hw, r0, c0, h, w):
     out = np.zeros((n, kk))
     for k in range(n):
         i, j = band[k, 0], band[k, 1]
-        for d in range(max(-r, -i, r0 - i), min(r, h - 1 - i, rows - 1 + r0 - i) + 1):
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        d_lo = max(-r, -i, r0 - i)
+        d_hi = min(r, h - 1 - i, rows - 1 + r0 - i)
+        for d in range(d_lo, d_hi + 1):
             pi = i + d - r0
-            lo = min(max(max(j - hw[d + r], 0) - c0, 0), cols)
-            hi = min(max(min(j + hw[d + r], w - 1) - c0 + 1, 0), cols)
-            for q in range(kk):
-                out[k, q] += prefixes[pi, hi, q] - prefixes[pi, lo, q]
+            half = hw[d + r]
+            lo = min(max(max(j - half, 0) - c0, 0), cols)
+            hi = min(max(min(j + half, w - 1) - c0 + 1, 0), cols)
+            a0 += prefixes[pi, hi, 0] - prefixes[pi, lo, 0]
+            if kk > 1:
+                a1 += prefixes[pi, hi, 1] - prefixes[pi, lo, 1]
+            if kk > 2:
+                a2 += prefixes[pi, hi, 2] - prefixes[pi, lo, 2]
+                a3 += prefixes[pi, hi, 3] - prefixes[pi, lo, 3]
+        out[k, 0] = a0
+        if kk > 1:
+            out[k, 1] = a1
+        if kk > 2:
+            out[k, 2] = a2
+            out[k, 3] = a3
     return out
 
 
@@ -379,3 +402,88 @@ def count_changed(phi, snapshot, r0, r1, c0, c1):
             if (phi[i, j] > 0) != snapshot[i, j]:
                 n += 1
     return n
+
+
+@njit(cache=True)
+def local_region_force(phi, image, point_image, band, hw, r0, r1, c0, c1, static_prefix, count, total,
+                       scale, eps, integral):
+    """LCV's region force (Eq. 2–5) at every band point, in one pass.
+
+    The disk sums of ``H = [φ > 0]`` and ``H·I`` (and, with ``integral``, of
+    ``δ_ε(φ)`` and ``δ_ε(φ)·I``) come from row prefix sums over the window
+    ``r0:r1, c0:c1`` built here; the pixel count and intensity sum of each ball
+    come from ``count``/``total``, filled from ``static_prefix`` the first time
+    a pixel needs them (NaN marks "not yet"). Returns ``(force, c_in, c_out)``:
+    ``force = clip(−(c_in − c_out)(c_in + c_out − 2v) / scale, −1, 1)`` with
+    ``v`` the δ-weighted mean intensity in the ball (``integral``) or
+    ``point_image`` at the point; 0 where a side of the ball is empty.
+    """
+    h, w = phi.shape
+    dyn = stack_local_fields(phi, image, eps, r0, r1, c0, c1, integral)
+    sums = disk_sums(dyn, band, hw, r0, c0, h, w)
+    n = band.shape[0]
+    r = (hw.shape[0] - 1) // 2
+    force = np.zeros(n)
+    c_in = np.full(n, np.nan)
+    c_out = np.full(n, np.nan)
+    for k in range(n):
+        i, j = band[k, 0], band[k, 1]
+        if np.isnan(count[i, j]):
+            a = 0.0
+            b = 0.0
+            for d in range(max(-r, -i), min(r, h - 1 - i) + 1):
+                lo = max(j - hw[d + r], 0)
+                hi = min(j + hw[d + r], w - 1) + 1
+                a += static_prefix[i + d, hi, 0] - static_prefix[i + d, lo, 0]
+                b += static_prefix[i + d, hi, 1] - static_prefix[i + d, lo, 1]
+            count[i, j] = a
+            total[i, j] = b
+        n_in, s_in = sums[k, 0], sums[k, 1]
+        n_out = count[i, j] - n_in
+        if n_in <= 0 or n_out <= 0:
+            continue
+        u = s_in / n_in
+        v_out = (total[i, j] - s_in) / n_out
+        c_in[k] = u
+        c_out[k] = v_out
+        if integral:
+            if sums[k, 2] <= 0:
+                continue
+            value = sums[k, 3] / sums[k, 2]
+        else:
+            value = point_image[i, j]
+        f = -(u - v_out) * (u + v_out - 2.0 * value) / scale
+        force[k] = min(max(f, -1.0), 1.0)
+    return force, c_in, c_out
+
+
+@njit(cache=True)
+def add_geodesic_where_flat(force, c_in, c_out, kappa1, phi, band, g, gx, gy, weight):
+    """GLCV's speed (Eq. 7): the region force plus, where ``|c_in − c_out| < κ1`` (t(x) = 1,
+    Eq. 6), the geodesic bracket with the balloon weight ``weight`` (an image)."""
+    n = band.shape[0]
+    flat = np.zeros(n, np.bool_)
+    m = 0
+    for k in range(n):
+        d = c_in[k] - c_out[k]
+        if not np.isnan(d) and abs(d) < kappa1:
+            flat[k] = True
+            m += 1
+    if m == 0:
+        return force
+    sub = np.empty((m, 2), np.int32)
+    alpha = np.empty(m)
+    q = 0
+    for k in range(n):
+        if flat[k]:
+            sub[q, 0], sub[q, 1] = band[k, 0], band[k, 1]
+            alpha[q] = weight[band[k, 0], band[k, 1]]
+            q += 1
+    geo = geodesic_terms(phi, sub, g, gx, gy, alpha)
+    out = force.copy()
+    q = 0
+    for k in range(n):
+        if flat[k]:
+            out[k] += geo[q]
+            q += 1
+    return out

@@ -114,9 +114,9 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
         s = params.setdefault("sigma_px", sigma or max(1.0, SIGMA_FRACTION * equivalent_radius_px(phi) * factor))
         force = region_force(img, phi, factor, params, radius, form)
         k1 = params.setdefault("kappa1", kappa1 if kappa1 is not None else params["edge_contrast"])
-        g, gx, gy = edge_indicator(img, max(s / factor, 0.5))
+        smooth = ndimage.gaussian_filter(img, max(s / factor, 0.5), mode="nearest")
+        g, gx, gy = edge_indicator(img, max(s / factor, 0.5), smooth)
         if balloon == "target":
-            smooth = ndimage.gaussian_filter(img, max(s / factor, 0.5), mode="nearest")
             if "target_model" not in params:
                 params["target_model"] = TargetModel.learn(smooth, phi > 0)
             weight = alpha * params["target_model"].weight(smooth)
@@ -125,13 +125,7 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
 
         def speed(p, band, box):
             region, c_in, c_out = force(p, band, box)
-            flat = np.abs(np.nan_to_num(c_in - c_out, nan=0.0)) < k1  # t(x), Eq. 6
-            if not flat.any():
-                return region
-            geo = np.zeros_like(region)
-            fb = band[flat]
-            geo[flat] = K.geodesic_terms(p, fb, g, gx, gy, weight[fb[:, 0], fb[:, 1]])
-            return region + geo
+            return K.add_geodesic_where_flat(region, c_in, c_out, k1, p, band, g, gx, gy, weight)  # Eq. 6-7
 
         return speed, mu
 

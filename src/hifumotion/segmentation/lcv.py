@@ -91,12 +91,7 @@ def lcv_force(stats: LocalStatistics, phi: np.ndarray, image: np.ndarray, band: 
     the local mid-level moves at full speed) and clipped to [-1, 1]. Returns
     that force and the local means ``(c_x1, c_x2)``.
     """
-    c_in, c_out, s_d, s_di, _, _ = stats.local_means(phi, image, band, box, EPSILON, with_delta=integral)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        source = image if point_image is None else point_image
-        value = s_di / s_d if integral else source[band[:, 0], band[:, 1]]
-        region = (c_in - c_out) * ((c_in + c_out) - 2.0 * value)
-    return normalise(-region, scale), c_in, c_out
+    return stats.region_force(phi, band, box, point_image, scale, integral, EPSILON)
 
 
 #: How Eq. 5's integral is evaluated (see :func:`lcv_force`).
