@@ -126,3 +126,13 @@ def test_segment_rejects_unknown_method(tmp_path):
     data = make_dataset(tmp_path / "data", 1)
     assert_one_line_error(run("segment", str(data / "images" / "disc0.png"), "--init", str(data / "init.json"),
                               "--method", "snake", "-o", str(tmp_path / "x")), "unknown method")
+
+
+def test_phantom_command_writes_the_dataset_layout(tmp_path):
+    out = tmp_path / "ph"
+    proc = run("-q", "phantom", "--shape", "irregular", "--preset", "hard", "--seed", "3", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    for name in ("images/phantom.png", "masks/phantom.png", "init.json", "run_info.json"):
+        assert (out / name).is_file(), name
+    assert json.loads((out / "run_info.json").read_text())["seed"] == 3
+    assert_one_line_error(run("phantom", "--preset", "impossible", "-o", str(tmp_path / "x")), "--preset")
