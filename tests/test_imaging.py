@@ -110,3 +110,27 @@ def test_phantom_initial_contours_follow_the_data_readme(tmp_path):
         entry = json.loads((tmp_path / f"p{seed}" / "init.json").read_text())["phantom.png"]
         assert len(entry["points"]) == 6
     assert 0.55 < np.mean(scores) < 0.75  # the ellipse at 70 % of the axes: about half the area
+
+
+def test_echogenicity_map_sets_the_inclusion_contrast():
+    """A disc of backscatter power 0.25 (−6 dB) images 6 dB darker than the background."""
+    from hifumotion.imaging import simulate_image
+
+    rows, cols = np.mgrid[0:256, 0:256]
+    disc = np.hypot(rows - 128, cols - 128) < 50
+    echo = np.where(disc, 0.25, 1.0)
+    contrasts = []
+    for seed in range(3):
+        frame = simulate_image(echo, SPACING, quiet(), seed=seed)
+        inner = np.hypot(rows - 128, cols - 128) < 40
+        outer = (np.hypot(rows - 128, cols - 128) > 65) & (rows > 20) & (rows < 236) & (cols > 20) & (cols < 236)
+        contrasts.append(10 * np.log10(np.mean(frame.envelope[inner] ** 2) / np.mean(frame.envelope[outer] ** 2)))
+    assert np.mean(contrasts) == pytest.approx(10 * np.log10(0.25), abs=0.6)
+
+
+def test_bad_echogenicity_is_a_clear_error():
+    from hifumotion.errors import InputError
+    from hifumotion.imaging import simulate_image
+
+    with pytest.raises(InputError, match="echogenicity"):
+        simulate_image(-np.ones((32, 32)), SPACING)

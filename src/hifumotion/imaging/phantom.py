@@ -25,7 +25,7 @@ import numpy as np
 from scipy import ndimage
 
 from hifumotion.errors import InputError
-from hifumotion.imaging.bmode import BModeOptions, Scatterers, Transducer, simulate_frame
+from hifumotion.imaging.bmode import BModeOptions, Scatterers, Transducer, echogenicity_sampler, simulate_frame
 
 
 @dataclass(frozen=True)
@@ -143,24 +143,11 @@ def make_phantom(shape_kind: str = "ellipse", preset: str = "medium", seed: int 
                             focus_depth_mm=0.55 * size_px[0] * spacing_mm)
     extent = (size_px[0] * spacing_mm, size_px[1] * spacing_mm)
     scat = Scatterers.uniform(extent, transducer, rng)
-    lookup = echogenicity_lookup(echo, (spacing_mm, spacing_mm))
+    lookup = echogenicity_sampler(echo, (spacing_mm, spacing_mm))
     frame = simulate_frame(lookup, scat, None, size_px, (spacing_mm, spacing_mm), transducer,
                            BModeOptions(p.shadow_db_per_mm, p.specular_gain, int(rng.integers(2**31))), mask)
     return {"image": frame.image, "mask": mask, "init": initial_contours(mask, rng), "spacing_mm": spacing_mm,
             "preset": asdict(p), "transducer": asdict(transducer)}
-
-
-def echogenicity_lookup(echo: np.ndarray, spacing_mm: tuple[float, float]):
-    """``positions (N, 2) (x_mm, z_mm) -> echogenicity`` by nearest pixel of a map (edge values outside)."""
-    dz, dx = spacing_mm
-    h, w = echo.shape
-
-    def at(positions: np.ndarray) -> np.ndarray:
-        j = np.clip(np.rint(positions[:, 0] / dx).astype(int), 0, w - 1)
-        i = np.clip(np.rint(positions[:, 1] / dz).astype(int), 0, h - 1)
-        return echo[i, j]
-
-    return at
 
 
 def write_phantom(folder: str | Path, phantom: dict[str, Any], name: str = "phantom.png") -> Path:
