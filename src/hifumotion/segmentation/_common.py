@@ -245,5 +245,5 @@ def run_narrow_band(image: Any, init: Any, method: str, build: SpeedBuilder, par
         speed, mu = build(level_image, level_phi, f)
         evo = evolve(level_phi, speed, cap, curvature_weight=mu)
         phi, previous, total = evo.phi, f, total + evo.iterations
-    params = {k: v for k, v in params.items() if not hasattr(v, "weight")} | {"pyramid_factors": factors}
+    params = dict(params, pyramid_factors=factors)
     return make_result(phi, evo, method, t0, spacing, params, iterations=total)

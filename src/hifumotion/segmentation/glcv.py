@@ -109,6 +109,7 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
     if balloon not in ("constant", "target"):
         raise InputError(f"balloon must be 'constant' or 'target', got {balloon!r}", "balloon")
     params: dict[str, Any] = {"mu": mu, "alpha": alpha, "balloon": balloon, "form": form}
+    learned: dict[str, TargetModel] = {}
 
     def build(img, phi, factor):
         s = params.setdefault("sigma_px", sigma or max(1.0, SIGMA_FRACTION * equivalent_radius_px(phi) * factor))
@@ -117,9 +118,9 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
         smooth = ndimage.gaussian_filter(img, max(s / factor, 0.5), mode="nearest")
         g, gx, gy = edge_indicator(img, max(s / factor, 0.5), smooth)
         if balloon == "target":
-            if "target_model" not in params:
-                params["target_model"] = TargetModel.learn(smooth, phi > 0)
-            weight = alpha * params["target_model"].weight(smooth)
+            if "model" not in learned:  # from the initial contour, on the coarsest level
+                learned["model"] = TargetModel.learn(smooth, phi > 0)
+            weight = alpha * learned["model"].weight(smooth)
         else:
             weight = np.full(img.shape, float(alpha))
 
