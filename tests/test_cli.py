@@ -136,3 +136,28 @@ def test_phantom_command_writes_the_dataset_layout(tmp_path):
         assert (out / name).is_file(), name
     assert json.loads((out / "run_info.json").read_text())["seed"] == 3
     assert_one_line_error(run("phantom", "--preset", "impossible", "-o", str(tmp_path / "x")), "--preset")
+
+
+def test_reconstruct_command_from_a_folder_of_masks(tmp_path):
+    rows, cols = np.mgrid[0:80, 0:90]
+    zs = np.arange(-5.5, 6.0, 1.0)
+    masks_dir = tmp_path / "sweep"
+    masks_dir.mkdir()
+    for k, z in enumerate(zs):  # an ellipsoid 14 x 11 x 12 mm (semi-axes 7, 5.5, 6) at 0.2 mm pixels
+        x, y = cols * 0.2 - 9.0, rows * 0.2 - 8.0
+        m = (x / 7.0) ** 2 + (y / 5.5) ** 2 <= 1 - (z / 6.0) ** 2
+        iio.imwrite(masks_dir / f"slice_{k:03d}.png", m.astype(np.uint8) * 255)
+    out = tmp_path / "rec"
+    proc = run("-q", "reconstruct", str(masks_dir), "--slice-spacing", "1.0", "--spacing", "0.2",
+               "--particle-spacing", "1.0", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "reconstruction.json").read_text())
+    assert summary["watertight"]
+    assert summary["volume_mm3"] == pytest.approx(4 / 3 * np.pi * 7 * 5.5 * 6, rel=0.03)
+    for name in ("tissue.stl", "tissue.ply", "tissue.vtp", "tissue_volume.nii.gz", "particles.csv", "run_info.json"):
+        assert (out / name).is_file(), name
+    import trimesh
+
+    assert trimesh.load(out / "tissue.stl").is_watertight
+    assert "<PolyData>" in (out / "tissue.vtp").read_text()[:300]
+    assert_one_line_error(run("reconstruct", str(masks_dir), "-o", str(tmp_path / "x")), "--slice-spacing")
