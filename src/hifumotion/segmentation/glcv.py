@@ -128,7 +128,7 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
             region, c_in, c_out = force(p, band, box)
             return K.add_geodesic_where_flat(region, c_in, c_out, k1, p, band, g, gx, gy, weight)  # Eq. 6-7
 
-        return speed, mu
+        return speed, mu, lambda p, cap: force.evolve(p, cap, mu, (k1, g, gx, gy, weight))
 
     return run_narrow_band(image, init, "glcv", build, params, spacing=spacing, multiscale=multiscale,
                            max_iterations=max_iterations)

@@ -24,7 +24,7 @@ from hifumotion.segmentation._common import (
     run_narrow_band,
 )
 from hifumotion.segmentation import _kernels as K
-from hifumotion.segmentation.levelset import EPSILON, band_box
+from hifumotion.segmentation.levelset import EPSILON, Evolution, band_box
 
 #: Local radius r as a fraction of the initial contour's equivalent radius (Eq. 1).
 RADIUS_FRACTION = 0.3
@@ -100,8 +100,38 @@ FORMS = ("smoothed", "integral", "point")
 SMOOTHING_FRACTION = 0.25
 
 
-def region_force(img: np.ndarray, phi: np.ndarray, factor: int, params: dict, radius: float | None, form: str):
-    """Set up LCV's region force on one pyramid level; returns ``force(phi, band, box) -> (F, c_x1, c_x2)``.
+class RegionForce:
+    """LCV's region force on one pyramid level: ``force(phi, band, box) -> (F, c_x1, c_x2)``,
+    and :meth:`evolve`, the whole evolution of LCV or GLCV in one compiled loop."""
+
+    def __init__(self, stats: LocalStatistics, scale: float, integral: bool, point_image: np.ndarray | None):
+        self.stats, self.scale, self.integral, self.point_image = stats, scale, integral, point_image
+
+    def __call__(self, phi, band, box):
+        return lcv_force(self.stats, phi, self.stats.image, band, box, self.scale, self.integral, self.point_image)
+
+    def evolve(self, phi: np.ndarray, max_iterations: int, mu: float, geodesic: tuple | None = None) -> Evolution:
+        """Evolve ``phi`` in place (see :func:`_kernels.evolve_region`); ``geodesic`` is
+        ``(kappa1, g, gx, gy, weight)`` for GLCV, None for LCV."""
+        from hifumotion.segmentation import levelset as L
+
+        st = self.stats
+        pim = st.image if self.point_image is None else self.point_image
+        if geodesic is None:
+            dummy = np.zeros((1, 1))
+            geo = (0.0, dummy, dummy, dummy, dummy)
+        else:
+            geo = geodesic
+        it, converged = K.evolve_region(phi, st.image, pim, st.half_widths, float(st.radius_px), st.prefix, st.count,
+                                        st.total, float(self.scale), float(EPSILON), bool(self.integral),
+                                        geodesic is not None, float(geo[0]), geo[1], geo[2], geo[3], geo[4],
+                                        float(mu), int(max_iterations), float(L.CFL), float(L.BAND),
+                                        float(L.UPDATE_BAND), int(L.CONVERGENCE_WINDOW), float(L.CONVERGENCE_FRACTION))
+        return Evolution(phi, int(it), bool(converged))
+
+
+def region_force(img: np.ndarray, phi: np.ndarray, factor: int, params: dict, radius: float | None, form: str) -> RegionForce:
+    """Set up LCV's region force on one pyramid level (a :class:`RegionForce`).
 
     Resolves and records in ``params`` the scale-derived values on the first
     (coarsest) level: the local radius r, the edge contrast and the force unit.
@@ -115,15 +145,10 @@ def region_force(img: np.ndarray, phi: np.ndarray, factor: int, params: dict, ra
     stats = LocalStatistics.of(img, r / factor)
     if "force_scale" not in params:
         params["edge_contrast"], params["force_scale"] = force_scale(stats, phi, img)
-    scale = params["force_scale"]
     point_image = None
     if form == "smoothed":
         point_image = ndimage.gaussian_filter(img, max(SMOOTHING_FRACTION * r / factor, 0.5), mode="nearest")
-
-    def force(p, band, box):
-        return lcv_force(stats, p, img, band, box, scale, form == "integral", point_image)
-
-    return force
+    return RegionForce(stats, params["force_scale"], form == "integral", point_image)
 
 
 def lcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, form: str = "smoothed",
@@ -158,7 +183,7 @@ def lcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, f
         def speed(p, band, box):
             return force(p, band, box)[0]
 
-        return speed, mu
+        return speed, mu, lambda p, cap: force.evolve(p, cap, mu)
 
     return run_narrow_band(image, init, "lcv", build, params, spacing=spacing, multiscale=multiscale,
                            max_iterations=max_iterations)
