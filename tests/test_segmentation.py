@@ -170,3 +170,17 @@ def test_nan_image_is_a_clear_error():
 def test_unknown_method_is_a_clear_error():
     with pytest.raises(InputError, match="unknown method"):
         segment(np.zeros((50, 50)), Ellipse(25, 25, 10, 10), "snake")
+
+
+@pytest.mark.parametrize("method", ["lcv", "glcv"])
+def test_compiled_loop_matches_the_python_loop(method, monkeypatch):
+    import importlib
+
+    common = importlib.import_module("hifumotion.segmentation._common")
+    img, _ = speckled_uneven_phantom(seed=1)
+    init = Ellipse(100, 100, 45, 42, 0)
+    fast = segment(img, init, method)
+    monkeypatch.setattr(common, "COMPILED_LOOP", False)
+    slow = segment(img, init, method)
+    assert fast.iterations == slow.iterations
+    assert np.array_equal(fast.mask, slow.mask)
