@@ -56,16 +56,6 @@ CONVERGENCE_WINDOW = 10
 CONVERGENCE_FRACTION = 0.005
 
 
-def dirac(phi: np.ndarray, eps: float = EPSILON) -> np.ndarray:
-    """Regularised Dirac ``δ_ε(φ) = ε / (π (ε² + φ²))``."""
-    return (eps / np.pi) / (eps * eps + np.asarray(phi, float) ** 2)
-
-
-def heaviside(phi: np.ndarray, eps: float = EPSILON) -> np.ndarray:
-    """Regularised Heaviside ``H_ε(φ) = ½ (1 + (2/π) arctan(φ/ε))`` (Chan & Vese 2001)."""
-    return 0.5 * (1.0 + (2.0 / np.pi) * np.arctan(np.asarray(phi, float) / eps))
-
-
 def _segments_of_polygon(points: np.ndarray) -> np.ndarray:
     closed = np.vstack([points, points[:1]])
     return np.column_stack([closed[:-1, 0], closed[:-1, 1], closed[1:, 0], closed[1:, 1]]).astype(np.float64)
