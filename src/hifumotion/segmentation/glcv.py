@@ -38,7 +38,7 @@ from hifumotion.segmentation.lcv import MU, region_force
 #: equivalent radius: wide enough to see through speckle grains, which GAC's own σ is not.
 SIGMA_FRACTION = 0.2
 #: Balloon weight α of Eq. 7 (> 0 expands: the initial contour is inside the target).
-ALPHA = 0.5
+ALPHA = 0.3
 
 
 @dataclass(frozen=True)

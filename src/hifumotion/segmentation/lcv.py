@@ -34,7 +34,7 @@ RADIUS_MIN_PX, RADIUS_MAX_PX = 6.0, 40.0
 MU = 1.0
 #: The local contrast that counts as an edge, in units of the median contrast along the initial
 #: contour (which is what speckle alone produces). It is GLCV's κ1 (Eq. 6) and LCV's force unit.
-CONTRAST_FACTOR = 3.0
+CONTRAST_FACTOR = 4.0
 
 
 def local_radius(radius_px: float) -> float:
