@@ -21,6 +21,64 @@ def _cross(a: float, b: float) -> float:
 
 
 @njit(cache=True)
+def _cell_segments(phi, i, j, segs, pts):
+    """Marching-squares segments of the cell with top-left pixel (i, j) into ``segs``; returns their count."""
+    a = phi[i, j]          # top-left     (x=j,   y=i)
+    b = phi[i, j + 1]      # top-right    (x=j+1, y=i)
+    c = phi[i + 1, j + 1]  # bottom-right (x=j+1, y=i+1)
+    d = phi[i + 1, j]      # bottom-left  (x=j,   y=i+1)
+    code = (a > 0) * 1 + (b > 0) * 2 + (c > 0) * 4 + (d > 0) * 8
+    if code == 0 or code == 15:
+        return 0
+    # crossing points on the four edges (only valid where the edge changes sign)
+    tx = j + _cross(a, b) if (a > 0) != (b > 0) else 0.0
+    ty = float(i)
+    rx = float(j + 1)
+    ry = i + _cross(b, c) if (b > 0) != (c > 0) else 0.0
+    bx = j + _cross(d, c) if (d > 0) != (c > 0) else 0.0
+    by = float(i + 1)
+    lx = float(j)
+    ly = i + _cross(a, d) if (a > 0) != (d > 0) else 0.0
+    if code == 5 or code == 10:  # saddle
+        centre = 0.25 * (a + b + c + d)
+        if (centre > 0) == (code == 5):
+            # a and c connected: separate b's and d's corners
+            segs[0, 0], segs[0, 1], segs[0, 2], segs[0, 3] = tx, ty, rx, ry
+            segs[1, 0], segs[1, 1], segs[1, 2], segs[1, 3] = bx, by, lx, ly
+        else:
+            segs[0, 0], segs[0, 1], segs[0, 2], segs[0, 3] = tx, ty, lx, ly
+            segs[1, 0], segs[1, 1], segs[1, 2], segs[1, 3] = rx, ry, bx, by
+        return 2
+    m = 0
+    if (a > 0) != (b > 0):
+        pts[m, 0], pts[m, 1] = tx, ty
+        m += 1
+    if (b > 0) != (c > 0):
+        pts[m, 0], pts[m, 1] = rx, ry
+        m += 1
+    if (d > 0) != (c > 0) and m < 2:
+        pts[m, 0], pts[m, 1] = bx, by
+        m += 1
+    if (a > 0) != (d > 0) and m < 2:
+        pts[m, 0], pts[m, 1] = lx, ly
+        m += 1
+    segs[0, 0], segs[0, 1], segs[0, 2], segs[0, 3] = pts[0, 0], pts[0, 1], pts[1, 0], pts[1, 1]
+    return 1
+
+
+@njit(cache=True)
+def _append(out, n, segs, k):
+    for s in range(k):
+        if n == out.shape[0]:
+            bigger = np.empty((out.shape[0] * 2, 4))
+            bigger[:n] = out
+            out = bigger
+        out[n] = segs[s]
+        n += 1
+    return out, n
+
+
+@njit(cache=True)
 def interface_segments(phi, r0, r1, c0, c1):
     """Marching squares on the 0 level of ``phi`` within rows ``r0:r1`` and cols ``c0:c1``.
 
@@ -30,64 +88,42 @@ def interface_segments(phi, r0, r1, c0, c1):
     h, w = phi.shape
     r1 = min(r1, h - 1)
     c1 = min(c1, w - 1)
-    cap = 64
-    out = np.empty((cap, 4))
+    out = np.empty((64, 4))
     segs = np.empty((2, 4))
     pts = np.empty((2, 2))
     n = 0
     for i in range(max(r0, 0), r1):
         for j in range(max(c0, 0), c1):
-            a = phi[i, j]          # top-left     (x=j,   y=i)
-            b = phi[i, j + 1]      # top-right    (x=j+1, y=i)
-            c = phi[i + 1, j + 1]  # bottom-right (x=j+1, y=i+1)
-            d = phi[i + 1, j]      # bottom-left  (x=j,   y=i+1)
-            code = (a > 0) * 1 + (b > 0) * 2 + (c > 0) * 4 + (d > 0) * 8
-            if code == 0 or code == 15:
-                continue
-            # crossing points on the four edges (only valid where the edge changes sign)
-            tx = j + _cross(a, b) if (a > 0) != (b > 0) else 0.0
-            ty = float(i)
-            rx = float(j + 1)
-            ry = i + _cross(b, c) if (b > 0) != (c > 0) else 0.0
-            bx = j + _cross(d, c) if (d > 0) != (c > 0) else 0.0
-            by = float(i + 1)
-            lx = float(j)
-            ly = i + _cross(a, d) if (a > 0) != (d > 0) else 0.0
-            k = 0
-            if code == 5 or code == 10:  # saddle
-                centre = 0.25 * (a + b + c + d)
-                if (centre > 0) == (code == 5):
-                    # a and c connected: separate b's and d's corners
-                    segs[0, 0], segs[0, 1], segs[0, 2], segs[0, 3] = tx, ty, rx, ry
-                    segs[1, 0], segs[1, 1], segs[1, 2], segs[1, 3] = bx, by, lx, ly
-                else:
-                    segs[0, 0], segs[0, 1], segs[0, 2], segs[0, 3] = tx, ty, lx, ly
-                    segs[1, 0], segs[1, 1], segs[1, 2], segs[1, 3] = rx, ry, bx, by
-                k = 2
-            else:
-                m = 0
-                if (a > 0) != (b > 0):
-                    pts[m, 0], pts[m, 1] = tx, ty
-                    m += 1
-                if (b > 0) != (c > 0):
-                    pts[m, 0], pts[m, 1] = rx, ry
-                    m += 1
-                if (d > 0) != (c > 0) and m < 2:
-                    pts[m, 0], pts[m, 1] = bx, by
-                    m += 1
-                if (a > 0) != (d > 0) and m < 2:
-                    pts[m, 0], pts[m, 1] = lx, ly
-                    m += 1
-                segs[0, 0], segs[0, 1], segs[0, 2], segs[0, 3] = pts[0, 0], pts[0, 1], pts[1, 0], pts[1, 1]
-                k = 1
-            for s in range(k):
-                if n == cap:
-                    bigger = np.empty((cap * 2, 4))
-                    bigger[:cap] = out
-                    out = bigger
-                    cap *= 2
-                out[n] = segs[s]
-                n += 1
+            k = _cell_segments(phi, i, j, segs, pts)
+            if k:
+                out, n = _append(out, n, segs, k)
+    return out[:n]
+
+
+@njit(cache=True)
+def interface_segments_near(phi, band, stamp, tag):
+    """Marching squares only in the cells that have a corner in ``band``.
+
+    After a narrow-band update only band pixels changed, and a cell the zero
+    level crossed before had a corner within the band, so these cells hold
+    every crossing. ``stamp`` (int64, image-sized) marks visited cells with ``tag``.
+    """
+    h, w = phi.shape
+    out = np.empty((64, 4))
+    segs = np.empty((2, 4))
+    pts = np.empty((2, 2))
+    n = 0
+    for q in range(band.shape[0]):
+        for di in range(-1, 1):
+            for dj in range(-1, 1):
+                i = band[q, 0] + di
+                j = band[q, 1] + dj
+                if i < 0 or j < 0 or i >= h - 1 or j >= w - 1 or stamp[i, j] == tag:
+                    continue
+                stamp[i, j] = tag
+                k = _cell_segments(phi, i, j, segs, pts)
+                if k:
+                    out, n = _append(out, n, segs, k)
     return out[:n]
 
 
@@ -510,6 +546,7 @@ def evolve_region(phi, image, point_image, hw, radius_px, static_prefix, count, 
         for j in range(w):
             snapshot[i, j] = phi[i, j] > 0
     snap_box = box
+    stamp = np.zeros((h, w), np.int64)
     it = 0
     converged = False
     while it < max_iterations:
@@ -543,7 +580,7 @@ def evolve_region(phi, image, point_image, hw, radius_px, static_prefix, count, 
         apply_update(phi, band, force, dt, band_w + 1.0)
         g0, g1 = max(box[0] - 1, 0), min(box[1] + 1, h)
         g2, g3 = max(box[2] - 1, 0), min(box[3] + 1, w)
-        segments = interface_segments(phi, g0, g1, g2, g3)
+        segments = interface_segments_near(phi, band, stamp, it)
         redistance_box(phi, segments, band_w, g0, g1, g2, g3)
         b = band_bounds(phi, band_w, g0, g1, g2, g3)
         if b[1] == 0:
