@@ -4,7 +4,10 @@ LCV (Eq. 5) plus, where the neighbourhood of a contour point is nearly uniform
 (``t(x) = 1`` when ``|c_x1 − c_x2| < κ1``, Eq. 6), the geodesic active contour
 flow ``g|∇φ| div(∇φ/|∇φ|) + ∇g·∇φ + α g|∇φ|`` that carries the contour across
 flat regions; near the boundary the local contrast is high, ``t(x) = 0`` and
-LCV places the contour.
+LCV places the contour. By default the balloon is weighted by how typical
+each point's intensity is of the target (:class:`TargetModel`), which stops
+the leaks of the constant balloon on weak boundaries (``balloon="constant"``
+is the paper's form; ``docs/decisions.md``).
 
 References
 ----------
@@ -23,10 +26,8 @@ import numpy as np
 from scipy import ndimage
 
 from hifumotion.errors import InputError
-
 from hifumotion.segmentation import _kernels as K
 from hifumotion.segmentation._common import (
-    LocalStatistics,
     SegmentationResult,
     edge_indicator,
     equivalent_radius_px,
