@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from hifumotion.imaging import Scatterers, Transducer, make_phantom, simulate_frame, write_phantom
-from hifumotion.imaging.bmode import FWHM_TO_SIGMA
 
 SHAPE, SPACING = (256, 256), (0.1, 0.1)
 EXTENT = (SHAPE[0] * SPACING[0], SHAPE[1] * SPACING[1])

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hifumotion.contour import ClickedPoints, Contour, Ellipse
+from hifumotion.contour import ClickedPoints, Ellipse
 from hifumotion.errors import InputError
 from hifumotion.metrics import dice
 from hifumotion.segmentation import METHODS, segment, track

@@ -9,7 +9,7 @@ A segment is ``(x0, y0, x1, y1)`` in pixel coordinates (x = column).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 # --------------------------------------------------------------------------- interface geometry
 

@@ -20,7 +20,6 @@ from hifumotion.segmentation._common import (
     SegmentationResult,
     equivalent_radius_px,
     intensity_scale,
-    normalise,
     run_narrow_band,
 )
 from hifumotion.segmentation import _kernels as K

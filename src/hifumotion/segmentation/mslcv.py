@@ -34,7 +34,6 @@ from typing import Any
 import numpy as np
 
 from hifumotion.segmentation._common import (
-    LocalStatistics,
     SegmentationResult,
     equivalent_radius_px,
     run_narrow_band,
