@@ -526,6 +526,23 @@ def add_geodesic_where_flat(force, c_in, c_out, kappa1, phi, band, g, gx, gy, we
 
 
 @njit(cache=True)
+def time_step(force, cfl, mu):
+    """``(peak, Δt)``: the largest |speed| and the step ``cfl / max(peak, 1)``, at most
+    ``0.25 / μ`` (the explicit limit of a curvature term of weight μ). Raises on a non-finite speed."""
+    peak = 0.0
+    for k in range(force.shape[0]):
+        a = abs(force[k])
+        if a > peak:
+            peak = a
+    if not np.isfinite(peak):
+        raise FloatingPointError("level-set speed is not finite")
+    dt = cfl / max(peak, 1.0)
+    if mu != 0.0:
+        dt = min(dt, 0.25 / mu)
+    return peak, dt
+
+
+@njit(cache=True)
 def evolve_region(phi, image, point_image, hw, radius_px, static_prefix, count, total, scale, eps, integral,
                   geodesic, kappa1, g, gx, gy, weight, mu, max_iterations, cfl, band_w, update_band,
                   window, fraction):
@@ -564,19 +581,10 @@ def evolve_region(phi, image, point_image, hw, radius_px, static_prefix, count, 
             kappa = curvature(phi, band)
             for k in range(force.shape[0]):
                 force[k] += mu * kappa[k]
-        peak = 0.0
-        for k in range(force.shape[0]):
-            a = abs(force[k])
-            if a > peak:
-                peak = a
-        if not np.isfinite(peak):
-            raise FloatingPointError("level-set speed is not finite")
+        peak, dt = time_step(force, cfl, mu)
         if peak < 1e-9:
             converged = True
             break
-        dt = cfl / max(peak, 1.0)
-        if mu != 0.0:
-            dt = min(dt, 0.25 / mu)
         apply_update(phi, band, force, dt, band_w + 1.0)
         g0, g1 = max(box[0] - 1, 0), min(box[1] + 1, h)
         g2, g3 = max(box[2] - 1, 0), min(box[3] + 1, w)

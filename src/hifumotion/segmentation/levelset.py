@@ -177,15 +177,10 @@ def evolve(
         f = speed(phi, band, box)
         if curvature_weight:
             f = f + curvature_weight * K.curvature(phi, band)
-        peak = float(np.max(np.abs(f))) if f.size else 0.0
-        if not np.isfinite(peak):
-            raise FloatingPointError("level-set speed is not finite")
+        peak, dt = K.time_step(np.ascontiguousarray(f, dtype=np.float64), CFL, float(curvature_weight))
         if peak < 1e-9:
             converged = True
             break
-        dt = CFL / max(peak, 1.0)
-        if curvature_weight:
-            dt = min(dt, 0.25 / curvature_weight)
         flips = K.apply_update(phi, band, f, dt, BAND + 1.0)
         grown = (max(box[0] - 1, 0), min(box[1] + 1, h), max(box[2] - 1, 0), min(box[3] + 1, w))
         redistance(phi, BAND, grown)
