@@ -1,0 +1,203 @@
+"""SPH fluid and multiphase coupling (the paper's Eq. 8–12 and 18–20), SI units.
+
+Per fluid particle i, over the current neighbours j within the support radius h:
+
+* density by summation (Eq. 10): ``ρ_i = m_i W(0) + Σ_j m̃_j W_ij``, where
+  m̃_j is j's mass for a fluid neighbour and ``ρ0 v_j`` (its rest volume filled
+  with water) for a solid one (tissue, bar or wall) — Akinci et al. 2012's
+  boundary contribution, so water at rest next to a wall or the tissue is at ρ0;
+* equation of state ``p_i = K (ρ_i − ρ0)`` (Eq. 11's text; K = c² in m²/s²), clamped at 0 so the
+  density deficit of the free surface does not pull particles together;
+* pressure force (Eq. 11): ``f_i = −v_i Σ_j v_j (p_i + p_j) ∇W_ij``, v = m/ρ.
+  Two corrections to the printed Eq. 11, both in docs/decisions.md: the minus
+  of −∇p is restored, and the arithmetic mean (p_i + p_j)/2 is doubled —
+  over a full neighbourhood Σ v_j p_i ∇W_ij vanishes, so the mean would give
+  only ½∇p (a fluid compressing twice as much as K says, and inconsistent
+  with the walls). With the factor this is the standard symmetric SPH
+  pressure force (Monaghan 1992 for equal densities).
+  A solid neighbour (wall, tissue or bar particle w) carries the pressure
+  extrapolated from the water around it (Adami, Hu & Adams 2012):
+  ``p_w = (Σ_f p_f W_wf + g · Σ_f ρ_f (x_w − x_f) W_wf) / Σ_f W_wf`` — the
+  hydrostatic term keeps the water from sinking into the floor — so water
+  pushes on the tissue, the bar and the walls: buoyancy and the tank. (Adami
+  also subtracts the wall's acceleration; it is neglected for slow motion);
+* fluid viscosity (Eq. 12): ``f_i = v_i Σ_j μ v_j (v_j − v_i) ∇²W_visc``;
+
+and between particles of different phases (fluid–tissue, fluid–bar,
+tissue–bar, tissue–wall, bar–wall) the coupling force of Eq. 18,
+``f = −K_c m_a m_b ∇W_ab``, a repulsion along the line between them. Eq. 19–20
+apply it as equal and opposite impulses (the paper prints both with a minus,
+which would not conserve momentum; the reaction's sign is restored). Solid
+contacts (not fluid) also carry a regularised Coulomb friction
+``|f_t| ≤ μ_f |f_n|`` against the relative sliding velocity.
+
+Every pair term is written so that the force i feels from j is exactly the
+negative of the one j feels from i, whichever particle's loop computes it:
+momentum is conserved to round-off. Forces land in a gathered per-particle
+array (no scatter, no atomics), so the loops run in parallel.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from hifumotion.particles._numba import FLUID, WALL
+from hifumotion.particles.kernels import cubic_dw, cubic_w, viscosity_laplacian
+
+
+@njit(cache=True, parallel=True)
+def fluid_density(x, mass, rest_volume, phase, n_fluid, table, counts, h, rho0, stiffness,
+                  density, pressure):
+    """Summation density (Eq. 10, kg/m³) and pressure (Pa) of fluid particles 0 … n_fluid − 1."""
+    w0 = cubic_w(0.0, h)
+    for i in prange(n_fluid):
+        rho = mass[i] * w0
+        for k in range(counts[i]):
+            j = table[i, k]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2 = x[j, 2] - x[i, 2]
+            wij = cubic_w(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), h)
+            if phase[j] == FLUID:
+                rho += mass[j] * wij
+            else:
+                rho += rho0 * rest_volume[j] * wij
+        density[i] = rho
+        p = stiffness * (rho - rho0)
+        pressure[i] = p if p > 0.0 else 0.0
+
+
+@njit(cache=True)
+def solid_pressure(x, n_fluid, table, counts, h, density, pressure, gravity, out):
+    """Pressure (Pa) of every solid particle next to water (Adami et al. 2012), into ``out``.
+
+    ``out`` has one entry per particle; fluid entries are left untouched, solids
+    without water around get 0. Serial: it scatters from the fluid rows.
+    """
+    n = out.shape[0]
+    num = np.zeros(n)
+    den = np.zeros(n)
+    for i in range(n_fluid):
+        for k in range(counts[i]):
+            j = table[i, k]
+            if j < n_fluid:
+                continue
+            r0 = x[j, 0] - x[i, 0]
+            r1 = x[j, 1] - x[i, 1]
+            r2 = x[j, 2] - x[i, 2]
+            wij = cubic_w(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), h)
+            num[j] += (pressure[i] + density[i] * (gravity[0] * r0 + gravity[1] * r1
+                                                   + gravity[2] * r2)) * wij
+            den[j] += wij
+    for j in range(n_fluid, n):
+        if den[j] > 0.0:
+            p = num[j] / den[j]
+            out[j] = p if p > 0.0 else 0.0
+        else:
+            out[j] = 0.0
+
+
+@njit(cache=True, parallel=True)
+def pair_forces(x, v, mass, rest_volume, phase, density, pressure, p_solid, first, table, counts,
+                h, mu_fluid, k_fluid, k_contact, friction, slip_speed, force):
+    """Pressure (Eq. 11), viscosity (Eq. 12) and coupling (Eq. 18) forces (N).
+
+    Rows of ``table`` are the neighbours of particles ``first, first + 1, …``; the
+    forces on them are *added* to ``force``. ``density``/``pressure`` are indexed
+    by fluid particle (fluid particles come first); ``p_solid`` by particle. Returns the largest contact
+    force magnitude seen (N), for the time-step limit.
+    """
+    n = counts.shape[0]
+    biggest = np.zeros(n)
+    for row in prange(n):
+        i = first + row
+        pi_phase = phase[i]
+        if pi_phase == FLUID:
+            vol_i = mass[i] / density[i]
+        else:
+            vol_i = rest_volume[i]
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        big = 0.0
+        for k in range(counts[row]):
+            j = table[row, k]
+            pj_phase = phase[j]
+            r0 = x[j, 0] - x[i, 0]
+            r1 = x[j, 1] - x[i, 1]
+            r2 = x[j, 2] - x[i, 2]
+            r = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+            if r <= 0.0:
+                continue
+            # ∇W_ij = ∇_i W(x_i − x_j) = dW/dr · (x_i − x_j)/r = −dW/dr · r_vec / r
+            g = -cubic_dw(r, h) / r
+            gx = g * r0
+            gy = g * r1
+            gz = g * r2
+            if pi_phase == FLUID or pj_phase == FLUID:
+                if pj_phase == FLUID:
+                    vol_j = mass[j] / density[j]
+                else:
+                    vol_j = rest_volume[j]
+                # (p_i + p_j): twice Eq. 11's arithmetic mean, see the module docstring
+                if pi_phase == FLUID and pj_phase == FLUID:
+                    p_pair = pressure[i] + pressure[j]
+                elif pi_phase == FLUID:
+                    p_pair = pressure[i] + p_solid[j]
+                else:
+                    p_pair = pressure[j] + p_solid[i]
+                s = -vol_i * vol_j * p_pair
+                fx += s * gx
+                fy += s * gy
+                fz += s * gz
+                if pi_phase == FLUID and pj_phase == FLUID and mu_fluid > 0.0:
+                    lap = viscosity_laplacian(r, h)
+                    t = mu_fluid * vol_i * vol_j * lap
+                    fx += t * (v[j, 0] - v[i, 0])
+                    fy += t * (v[j, 1] - v[i, 1])
+                    fz += t * (v[j, 2] - v[i, 2])
+            if pi_phase != pj_phase:
+                if pi_phase == FLUID or pj_phase == FLUID:
+                    if pi_phase == WALL or pj_phase == WALL:
+                        continue  # water and tank: pressure only
+                    kc = k_fluid
+                else:
+                    kc = k_contact
+                if kc == 0.0:
+                    continue
+                # Eq. 18: f_i = −K_c m_i m_j ∇W(x_i − x_j) = K_c m_i m_j dW/dr · r_vec / r;
+                # dW/dr < 0, so the force points away from j (a repulsion)
+                c = kc * mass[i] * mass[j] * cubic_dw(r, h) / r
+                fnx = c * r0
+                fny = c * r1
+                fnz = c * r2
+                fx += fnx
+                fy += fny
+                fz += fnz
+                fn = abs(c) * r
+                if fn > big:
+                    big = fn
+                if friction > 0.0 and pi_phase != FLUID and pj_phase != FLUID:
+                    ux = r0 / r
+                    uy = r1 / r
+                    uz = r2 / r
+                    w0 = v[j, 0] - v[i, 0]
+                    w1 = v[j, 1] - v[i, 1]
+                    w2 = v[j, 2] - v[i, 2]
+                    dn = w0 * ux + w1 * uy + w2 * uz
+                    t0 = w0 - dn * ux
+                    t1 = w1 - dn * uy
+                    t2 = w2 - dn * uz
+                    vt = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+                    scale = friction * fn / max(vt, slip_speed)
+                    fx += scale * t0
+                    fy += scale * t1
+                    fz += scale * t2
+        force[i, 0] += fx
+        force[i, 1] += fy
+        force[i, 2] += fz
+        biggest[row] = big
+    return biggest.max() if n else 0.0
