@@ -235,7 +235,7 @@ def _matmul_tn(a, b, out):
             out[r, c] = a[0, r] * b[0, c] + a[1, r] * b[1, c] + a[2, r] * b[2, c]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def stress_pass(x, x0, first, start, nbr, grad_w, volume, lam, g, k_v, corotated,
                 deform, b_mat, strain, work):
     """Eq. 13–16 per tissue particle: J (into ``deform``), ``B = v P`` (into ``b_mat``).
@@ -326,7 +326,7 @@ def stress_pass(x, x0, first, start, nbr, grad_w, volume, lam, g, k_v, corotated
         strain[i] = math.sqrt(2.0 / 3.0 * dev)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def force_pass(x, v, x0, first, start, nbr, w, grad_w, reverse, volume, deform, b_mat, support,
                youngs, hourglass, beta1, beta2, mu_max, rate_floor, force):
     """Elastic (Eq. 14–16), hourglass and rheological viscous (Eq. 12) forces (N), gathered.

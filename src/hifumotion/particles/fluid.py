@@ -48,11 +48,16 @@ from hifumotion.particles._numba import FLUID, WALL
 from hifumotion.particles.kernels import cubic_dw, cubic_w, viscosity_laplacian
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def fluid_density(x, mass, rest_volume, phase, n_fluid, table, counts, h, rho0, stiffness,
-                  density, pressure):
-    """Summation density (Eq. 10, kg/m³) and pressure (Pa) of fluid particles 0 … n_fluid − 1."""
+                  density, pressure, volume):
+    """Summation density (Eq. 10, kg/m³), pressure (Pa) and volume m/ρ (m³) of the water.
+
+    Fluid particles are 0 … n_fluid − 1; ``pressure`` and ``volume`` are per particle
+    (their solid entries are left alone).
+    """
     w0 = cubic_w(0.0, h)
+    h2 = h * h
     for i in prange(n_fluid):
         rho = mass[i] * w0
         for k in range(counts[i]):
@@ -60,24 +65,30 @@ def fluid_density(x, mass, rest_volume, phase, n_fluid, table, counts, h, rho0, 
             d0 = x[j, 0] - x[i, 0]
             d1 = x[j, 1] - x[i, 1]
             d2 = x[j, 2] - x[i, 2]
-            wij = cubic_w(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), h)
+            rr = d0 * d0 + d1 * d1 + d2 * d2
+            if rr >= h2:
+                continue
+            wij = cubic_w(math.sqrt(rr), h)
             if phase[j] == FLUID:
                 rho += mass[j] * wij
             else:
                 rho += rho0 * rest_volume[j] * wij
         density[i] = rho
+        volume[i] = mass[i] / rho
         p = stiffness * (rho - rho0)
         pressure[i] = p if p > 0.0 else 0.0
 
 
 @njit(cache=True)
-def solid_pressure(x, n_fluid, table, counts, h, density, pressure, gravity, out):
-    """Pressure (Pa) of every solid particle next to water (Adami et al. 2012), into ``out``.
+def solid_pressure(x, n_fluid, table, counts, h, density, pressure, gravity):
+    """Pressure (Pa) of every solid particle next to water (Adami et al. 2012).
 
-    ``out`` has one entry per particle; fluid entries are left untouched, solids
-    without water around get 0. Serial: it scatters from the fluid rows.
+    ``pressure`` has one entry per particle: the water's are read, the solids'
+    written (0 without water around). Serial: it scatters from the fluid rows.
     """
+    out = pressure
     n = out.shape[0]
+    h2 = h * h
     num = np.zeros(n)
     den = np.zeros(n)
     for i in range(n_fluid):
@@ -88,7 +99,10 @@ def solid_pressure(x, n_fluid, table, counts, h, density, pressure, gravity, out
             r0 = x[j, 0] - x[i, 0]
             r1 = x[j, 1] - x[i, 1]
             r2 = x[j, 2] - x[i, 2]
-            wij = cubic_w(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), h)
+            rr = r0 * r0 + r1 * r1 + r2 * r2
+            if rr >= h2:
+                continue
+            wij = cubic_w(math.sqrt(rr), h)
             num[j] += (pressure[i] + density[i] * (gravity[0] * r0 + gravity[1] * r1
                                                    + gravity[2] * r2)) * wij
             den[j] += wij
@@ -100,102 +114,93 @@ def solid_pressure(x, n_fluid, table, counts, h, density, pressure, gravity, out
             out[j] = 0.0
 
 
-@njit(cache=True, parallel=True)
-def pair_forces(x, v, mass, rest_volume, phase, density, pressure, p_solid, first, table, counts,
-                h, mu_fluid, k_fluid, k_contact, friction, slip_speed, force):
+@njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
+def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, mu_fluid,
+                k_fluid, k_contact, friction, slip_speed, force):
     """Pressure (Eq. 11), viscosity (Eq. 12) and coupling (Eq. 18) forces (N).
 
     Rows of ``table`` are the neighbours of particles ``first, first + 1, …``; the
-    forces on them are *added* to ``force``. ``density``/``pressure`` are indexed
-    by fluid particle (fluid particles come first); ``p_solid`` by particle. Returns the largest contact
-    force magnitude seen (N), for the time-step limit.
+    forces on them are *added* to ``force``. ``volume`` (m³) is m/ρ for water and the
+    rest volume for solids; ``pressure`` (Pa) is the water's own or, for a solid, the
+    one extrapolated by :func:`solid_pressure`. Returns the largest contact force
+    magnitude seen (N).
     """
     n = counts.shape[0]
     biggest = np.zeros(n)
+    h2 = h * h
     for row in prange(n):
         i = first + row
         pi_phase = phase[i]
-        if pi_phase == FLUID:
-            vol_i = mass[i] / density[i]
-        else:
-            vol_i = rest_volume[i]
+        i_fluid = pi_phase == FLUID
+        vol_i = volume[i]
+        p_i = pressure[i]
+        xi0 = x[i, 0]
+        xi1 = x[i, 1]
+        xi2 = x[i, 2]
         fx = 0.0
         fy = 0.0
         fz = 0.0
         big = 0.0
         for k in range(counts[row]):
             j = table[row, k]
-            pj_phase = phase[j]
-            r0 = x[j, 0] - x[i, 0]
-            r1 = x[j, 1] - x[i, 1]
-            r2 = x[j, 2] - x[i, 2]
-            r = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-            if r <= 0.0:
+            r0 = x[j, 0] - xi0
+            r1 = x[j, 1] - xi1
+            r2 = x[j, 2] - xi2
+            rr = r0 * r0 + r1 * r1 + r2 * r2
+            if rr >= h2 or rr <= 0.0:
                 continue
-            # ∇W_ij = ∇_i W(x_i − x_j) = dW/dr · (x_i − x_j)/r = −dW/dr · r_vec / r
-            g = -cubic_dw(r, h) / r
-            gx = g * r0
-            gy = g * r1
-            gz = g * r2
-            if pi_phase == FLUID or pj_phase == FLUID:
-                if pj_phase == FLUID:
-                    vol_j = mass[j] / density[j]
-                else:
-                    vol_j = rest_volume[j]
-                # (p_i + p_j): twice Eq. 11's arithmetic mean, see the module docstring
-                if pi_phase == FLUID and pj_phase == FLUID:
-                    p_pair = pressure[i] + pressure[j]
-                elif pi_phase == FLUID:
-                    p_pair = pressure[i] + p_solid[j]
-                else:
-                    p_pair = pressure[j] + p_solid[i]
-                s = -vol_i * vol_j * p_pair
-                fx += s * gx
-                fy += s * gy
-                fz += s * gz
-                if pi_phase == FLUID and pj_phase == FLUID and mu_fluid > 0.0:
-                    lap = viscosity_laplacian(r, h)
-                    t = mu_fluid * vol_i * vol_j * lap
-                    fx += t * (v[j, 0] - v[i, 0])
-                    fy += t * (v[j, 1] - v[i, 1])
-                    fz += t * (v[j, 2] - v[i, 2])
-            if pi_phase != pj_phase:
-                if pi_phase == FLUID or pj_phase == FLUID:
-                    if pi_phase == WALL or pj_phase == WALL:
-                        continue  # water and tank: pressure only
-                    kc = k_fluid
-                else:
-                    kc = k_contact
-                if kc == 0.0:
+            r = math.sqrt(rr)
+            pj_phase = phase[j]
+            j_fluid = pj_phase == FLUID
+            dw = cubic_dw(r, h)
+            if i_fluid or j_fluid:
+                # −v_i v_j (p_i + p_j) ∇_i W, ∇_i W = −dW/dr · r_vec / r (r_vec = x_j − x_i);
+                # (p_i + p_j) is twice Eq. 11's arithmetic mean, see the module docstring
+                sc = vol_i * volume[j] * (p_i + pressure[j]) * dw / r
+                fx += sc * r0
+                fy += sc * r1
+                fz += sc * r2
+                if i_fluid and j_fluid:
+                    if mu_fluid > 0.0:
+                        t = mu_fluid * vol_i * volume[j] * viscosity_laplacian(r, h)
+                        fx += t * (v[j, 0] - v[i, 0])
+                        fy += t * (v[j, 1] - v[i, 1])
+                        fz += t * (v[j, 2] - v[i, 2])
                     continue
-                # Eq. 18: f_i = −K_c m_i m_j ∇W(x_i − x_j) = K_c m_i m_j dW/dr · r_vec / r;
-                # dW/dr < 0, so the force points away from j (a repulsion)
-                c = kc * mass[i] * mass[j] * cubic_dw(r, h) / r
-                fnx = c * r0
-                fny = c * r1
-                fnz = c * r2
-                fx += fnx
-                fy += fny
-                fz += fnz
-                fn = abs(c) * r
-                if fn > big:
-                    big = fn
-                if friction > 0.0 and pi_phase != FLUID and pj_phase != FLUID:
-                    ux = r0 / r
-                    uy = r1 / r
-                    uz = r2 / r
-                    w0 = v[j, 0] - v[i, 0]
-                    w1 = v[j, 1] - v[i, 1]
-                    w2 = v[j, 2] - v[i, 2]
-                    dn = w0 * ux + w1 * uy + w2 * uz
-                    t0 = w0 - dn * ux
-                    t1 = w1 - dn * uy
-                    t2 = w2 - dn * uz
-                    vt = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-                    scale = friction * fn / max(vt, slip_speed)
-                    fx += scale * t0
-                    fy += scale * t1
-                    fz += scale * t2
+                if pi_phase == WALL or pj_phase == WALL:
+                    continue  # water and tank: pressure only
+                kc = k_fluid
+            elif pi_phase == pj_phase:
+                continue
+            else:
+                kc = k_contact
+            if kc == 0.0:
+                continue
+            # Eq. 18: f_i = −K_c m_i m_j ∇W(x_i − x_j) = K_c m_i m_j dW/dr · r_vec / r;
+            # dW/dr < 0, so the force points away from j (a repulsion)
+            c = kc * mass[i] * mass[j] * dw / r
+            fx += c * r0
+            fy += c * r1
+            fz += c * r2
+            fn = -c * r
+            if fn > big:
+                big = fn
+            if friction > 0.0 and not i_fluid and not j_fluid:
+                ux = r0 / r
+                uy = r1 / r
+                uz = r2 / r
+                w0 = v[j, 0] - v[i, 0]
+                w1 = v[j, 1] - v[i, 1]
+                w2 = v[j, 2] - v[i, 2]
+                dn = w0 * ux + w1 * uy + w2 * uz
+                t0 = w0 - dn * ux
+                t1 = w1 - dn * uy
+                t2 = w2 - dn * uz
+                vt = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+                scale = friction * fn / max(vt, slip_speed)
+                fx += scale * t0
+                fy += scale * t1
+                fz += scale * t2
         force[i, 0] += fx
         force[i, 1] += fy
         force[i, 2] += fz

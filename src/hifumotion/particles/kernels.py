@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=True, error_model="numpy")
 def cubic_w(r: float, h: float) -> float:
     """Cubic spline W(r, h) (1/m³); ``h`` is the support radius (Eq. 9)."""
     q = r / h
@@ -37,7 +37,7 @@ def cubic_w(r: float, h: float) -> float:
     return sigma * 2.0 * t * t * t
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=True, error_model="numpy")
 def cubic_dw(r: float, h: float) -> float:
     """dW/dr of the cubic spline (1/m⁴); ∇W(r_ij) = dW/dr · r_ij / |r_ij|."""
     q = r / h
@@ -50,7 +50,7 @@ def cubic_dw(r: float, h: float) -> float:
     return -sigma * 6.0 * t * t / h
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=True, error_model="numpy")
 def viscosity_laplacian(r: float, h: float) -> float:
     """∇²W_visc(r, h) = 45 / (π h⁶) (h − r) (1/m⁵), Müller et al. 2003 (Eq. 12)."""
     if r >= h:

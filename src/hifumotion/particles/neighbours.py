@@ -7,6 +7,10 @@ each query particle scans its 27 cells in parallel and writes its neighbours
 into its own row of a fixed-width table. When a row overflows, the table is
 rebuilt wider, so no neighbour is ever dropped.
 
+A skin (Verlet list) lets a table serve several steps: it is built with radius
+``h (1 + skin)`` and rebuilt once any particle has moved ``skin h / 2`` since
+(:meth:`CellGrid.stale`); kernels still test ``r < h`` pair by pair.
+
 The elastic tissue does not use this: it keeps the neighbourhoods of its rest
 configuration for the whole run (total Lagrangian, :mod:`.elastic`).
 """
@@ -89,6 +93,16 @@ def _fill_table(x, q0, q1, lo, inv_cell, dims, start, order, h, table, counts):
         counts[row] = n
 
 
+@njit(cache=True)
+def _max_displacement(x, x_then):
+    worst = 0.0
+    for i in range(x.shape[0]):
+        d = (x[i, 0] - x_then[i, 0]) ** 2 + (x[i, 1] - x_then[i, 1]) ** 2 + (x[i, 2] - x_then[i, 2]) ** 2
+        if d > worst:
+            worst = d
+    return np.sqrt(worst)
+
+
 @dataclass
 class NeighbourTable:
     """Neighbours of the query particles ``first … first + len(counts) − 1``.
@@ -109,10 +123,13 @@ class CellGrid:
     more slowly; leaving the domain is reported by the solver's divergence check.
     """
 
-    def __init__(self, lo_m, hi_m, h_m: float, width: int = 64):
+    def __init__(self, lo_m, hi_m, h_m: float, width: int = 64, skin: float = 0.0):
+        self.skin = float(skin)
+        h_m = float(h_m) * (1.0 + self.skin)
         self.lo = np.asarray(lo_m, np.float64) - h_m
         hi = np.asarray(hi_m, np.float64) + h_m
         self.h = float(h_m)
+        self.built_at: np.ndarray | None = None
         self.inv_cell = 1.0 / self.h
         self.dims = np.maximum(np.ceil((hi - self.lo) * self.inv_cell).astype(np.int64), 1)
         if int(np.prod(self.dims)) > 50_000_000:
@@ -120,9 +137,17 @@ class CellGrid:
                              "the domain is too big for the smoothing length")
         self.width = int(width)
 
+    def stale(self, x_m: np.ndarray) -> bool:
+        """Whether some particle moved more than half the skin since the last :meth:`query`."""
+        if self.built_at is None or self.built_at.shape != x_m.shape:
+            return True
+        limit = 0.5 * self.skin * self.h / (1.0 + self.skin)
+        return _max_displacement(x_m, self.built_at) > limit
+
     def query(self, x_m: np.ndarray, first: int, last: int) -> NeighbourTable:
-        """Neighbours (within ``h``) of particles ``first … last − 1`` among all of ``x_m``."""
+        """Neighbours (within ``h (1 + skin)``) of particles ``first … last − 1`` among all of ``x_m``."""
         x = np.ascontiguousarray(x_m, np.float64)
+        self.built_at = x[:last].copy()
         cid = _cell_index(x, self.lo, self.inv_cell, self.dims)
         start, order = _counting_sort(cid, int(np.prod(self.dims)))
         n = max(last - first, 0)

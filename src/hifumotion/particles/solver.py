@@ -61,6 +61,8 @@ class SolverSettings:
         Global velocity damping γ (1/s), for settling and static cases only.
     frozen_axes
         Velocity components held at zero for every particle (e.g. ``(2,)``: plane strain in x–y).
+    neighbour_skin
+        Verlet skin of the neighbour lists, as a fraction of h (rebuilt when stale).
     """
 
     cfl: float = 0.4
@@ -69,25 +71,24 @@ class SolverSettings:
     mass_scaling: float = 1.0
     damping_per_s: float = 0.0
     frozen_axes: tuple[int, ...] = ()
+    neighbour_skin: float = 0.15
 
 
 @njit(cache=True, parallel=True)
-def _integrate(x, v, force, mass, n, gravity, inertia_scale, damping, dt, fixed_mask,
+def _integrate(x, v, force, mass, n, gravity, inertia_scale, damping, dt, held, held_velocity,
                frozen, speed2):
+    """Symplectic Euler; components in ``held`` move at ``held_velocity`` (m/s) instead."""
     for i in prange(n):
-        if fixed_mask[i]:
-            v[i, 0] = 0.0
-            v[i, 1] = 0.0
-            v[i, 2] = 0.0
-            speed2[i] = 0.0
-            continue
         inv = 1.0 / (mass[i] * inertia_scale)
         s = 0.0
         for a in range(3):
-            acc = force[i, a] * inv + gravity[a] / inertia_scale - damping * v[i, a]
-            va = v[i, a] + dt * acc
-            if frozen[a]:
-                va = 0.0
+            if held[i, a]:
+                va = held_velocity[i, a]
+            else:
+                acc = force[i, a] * inv + gravity[a] / inertia_scale - damping * v[i, a]
+                va = v[i, a] + dt * acc
+                if frozen[a]:
+                    va = 0.0
             v[i, a] = va
             x[i, a] += dt * va
             s += va * va
@@ -125,12 +126,15 @@ class Solver:
         margin = 4 * h
         self.lo = s.domain_lo_m - margin
         self.hi = s.domain_hi_m + margin
-        self.grid = CellGrid(self.lo, self.hi, h)
+        self.grid = CellGrid(self.lo, self.hi, h, skin=settings.neighbour_skin)
+        self.table = None
         self.force = np.zeros_like(s.x)
-        self.fixed_mask = np.zeros(s.n_moving, np.bool_)
-        self.fixed_mask[s.tissue_slice] = s.tissue_fixed
-        # the rigid particles are moved by their bodies, not by _integrate
-        self.fixed_mask[s.slice_of(2)] = True
+        self.held = np.zeros((s.n_moving, 3), np.bool_)
+        self.held_velocity = np.zeros((s.n_moving, 3))
+        self.held[s.tissue_slice] = s.tissue_held
+        self.held_velocity[s.tissue_slice] = s.tissue_held_velocity_m_s
+        # the rigid particles are moved by their bodies (after _integrate)
+        self.held[s.slice_of(2)] = True
         self.frozen = np.zeros(3, np.bool_)
         self.frozen[list(settings.frozen_axes)] = True
         self.speed2 = np.zeros(s.n_moving)
@@ -154,7 +158,8 @@ class Solver:
             1 for k in (s.n_tissue, s.n_rigid, s.n_wall) if k) > 1
         self.tissue_volume = np.ascontiguousarray(s.rest_volume[s.tissue_slice])
         self.b_mat = np.zeros((s.n_tissue, 3, 3))
-        self.p_solid = np.zeros(len(s.x))
+        self.pressure = np.zeros(len(s.x))          # water's own, solids' extrapolated (Pa)
+        self.volume = s.rest_volume.copy()           # m/ρ for water, rest volume for solids (m³)
         self.work = np.zeros((s.n_tissue, 4, 3, 3))
         self.rigid_slice = s.slice_of(2)
         self.dt = self._step_size(0.0)
@@ -167,18 +172,21 @@ class Solver:
         self.force[:] = 0.0
         if not self.needs_pairs:
             return self._tissue_forces()
-        table = self.grid.query(s.x, 0, n)
+        if self.table is None or self.grid.stale(s.x[:n]):
+            self.table = self.grid.query(s.x, 0, n)
+        table = self.table
         if s.n_fluid:
             fluid.fluid_density(s.x, s.mass, s.rest_volume, s.phase, s.n_fluid, table.indices,
                                 table.counts, s.support_m, s.fluid.rest_density_kg_m3,
-                                s.fluid_stiffness_m2_s2, s.density, s.pressure)
+                                s.fluid_stiffness_m2_s2, s.density, self.pressure, self.volume)
             fluid.solid_pressure(s.x, s.n_fluid, table.indices, table.counts, s.support_m,
-                                 s.density, s.pressure, s.gravity_m_s2, self.p_solid)
+                                 s.density, self.pressure, s.gravity_m_s2)
+            s.pressure[:] = self.pressure[: s.n_fluid]
         c = s.coupling
         self.max_contact_force = fluid.pair_forces(
-            s.x, s.v, s.mass, s.rest_volume, s.phase, s.density, s.pressure, self.p_solid, 0,
-            table.indices, table.counts, s.support_m, s.fluid.viscosity_pa_s, s.fluid_coefficient,
-            s.contact_coefficient, c.friction, c.slip_speed_m_s, self.force)
+            s.x, s.v, s.mass, self.volume, s.phase, self.pressure, 0, table.indices, table.counts,
+            s.support_m, s.fluid.viscosity_pa_s, s.fluid_coefficient, s.contact_coefficient,
+            c.friction, c.slip_speed_m_s, self.force)
         return self._tissue_forces()
 
     def _tissue_forces(self) -> np.ndarray:
@@ -230,7 +238,7 @@ class Solver:
         self.compute_forces()
         rigid = self.rigid_slice
         _integrate(s.x, s.v, self.force, s.mass, n, s.gravity_m_s2, st.mass_scaling,
-                   st.damping_per_s, dt, self.fixed_mask, self.frozen, self.speed2)
+                   st.damping_per_s, dt, self.held, self.held_velocity, self.frozen, self.speed2)
         for body in s.bodies:
             sl = slice(body.first, body.first + body.count)
             body.step(self.force[sl], s.gravity_m_s2, s.time_s, dt, st.mass_scaling)

@@ -86,8 +86,9 @@ class ParticleSystem:
         Kernel support radius h (m); the particle spacing is ``spacing_m``.
     tissue_rest
         Rest positions of the tissue particles (m).
-    tissue_fixed
-        Tissue particles held in place (clamps).
+    tissue_held, tissue_held_velocity_m_s
+        ``(n_tissue, 3)``: velocity components prescribed (clamps, rollers, pulled
+        ends) and their values (m/s; 0 holds the particle in place).
     bodies
         The rigid bodies (their particles are the rigid block, in order).
     domain_lo_m, domain_hi_m
@@ -110,7 +111,8 @@ class ParticleSystem:
     domain_hi_m: np.ndarray
     tissue_rest: np.ndarray
     rest: RestNeighbourhoods | None
-    tissue_fixed: np.ndarray
+    tissue_held: np.ndarray
+    tissue_held_velocity_m_s: np.ndarray
     bodies: list[RigidBody] = field(default_factory=list)
     time_s: float = 0.0
     step: int = 0
@@ -176,6 +178,7 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
                  tissue_volumes_m3: np.ndarray | None = None,
                  tissue_density_kg_m3: float = 1050.0,
                  tissue_fixed: np.ndarray | None = None,
+                 tissue_held_velocity_m_s: np.ndarray | None = None,
                  bodies: list[dict] | None = None,
                  wall_positions_m: np.ndarray | None = None,
                  fluid: FluidParameters = FluidParameters(),
@@ -190,6 +193,8 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
     :class:`~hifumotion.particles.rigid.RigidBody` keyword (``force_n``,
     ``force_direction``, ``axis``, ``fixed``, ``prescribed_velocity_m_s``, ``name``).
     Particle volumes are ``spacing³`` unless ``tissue_volumes_m3`` is given.
+    ``tissue_fixed`` holds tissue particles in place: ``(n,)`` for all axes or ``(n, 3)``
+    per axis; held components move at ``tissue_held_velocity_m_s`` (default 0).
     """
     dx = float(spacing_m)
     if not dx > 0:
@@ -251,13 +256,18 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
         kc_contact = coupling.contact_pressure_factor * tissue.youngs_modulus_pa * dx * dx / (m_t * m_t * dw_max)
     rest = rest_neighbourhoods(xt, tissue.support_factor * dx, tissue.moment_floor,
                                tissue.mls_order) if len(xt) else None
-    fixed = np.zeros(len(xt), bool) if tissue_fixed is None else np.asarray(tissue_fixed, bool)
+    held = np.zeros((len(xt), 3), bool)
+    if tissue_fixed is not None:
+        tf = np.asarray(tissue_fixed, bool)
+        held[:] = tf[:, None] if tf.ndim == 1 else tf
+    held_v = np.zeros((len(xt), 3)) if tissue_held_velocity_m_s is None else \
+        np.broadcast_to(np.asarray(tissue_held_velocity_m_s, float), (len(xt), 3)).copy()
     n = len(x)
     return ParticleSystem(
         x=np.ascontiguousarray(x), v=np.zeros((n, 3)), mass=mass, rest_volume=vol, phase=phase,
         counts=counts, support_m=h, spacing_m=dx, fluid=fluid, tissue=tissue, coupling=coupling,
         gravity_m_s2=g, domain_lo_m=lo, domain_hi_m=hi, tissue_rest=xt.copy(), rest=rest,
-        tissue_fixed=fixed, bodies=rigid_bodies, fluid_stiffness_m2_s2=float(stiffness),
+        tissue_held=held, tissue_held_velocity_m_s=held_v, bodies=rigid_bodies, fluid_stiffness_m2_s2=float(stiffness),
         fluid_coefficient=float(kc_fluid), contact_coefficient=float(kc_contact),
         density=np.full(len(xf), rho0), pressure=np.zeros(len(xf)), strain=np.zeros(len(xt)),
         deform=np.tile(np.eye(3), (len(xt), 1, 1)),
