@@ -45,3 +45,35 @@ def track(items: Iterable[T], description: str, total: int | None = None) -> Ite
         for item in items:
             yield item
             progress.advance(task)
+
+
+class _Fraction:
+    """A progress bar driven by a fraction in [0, 1] (for simulated time, not item counts)."""
+
+    def __init__(self, description: str):
+        self.description = description
+        self.progress: Progress | None = None
+        self.task = None
+
+    def __enter__(self):
+        if not _quiet and console.is_terminal:
+            self.progress = Progress(TextColumn("{task.description}"), BarColumn(),
+                                     TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
+                                     TimeRemainingColumn(), console=console)
+            self.progress.__enter__()
+            self.task = self.progress.add_task(self.description, total=1.0)
+        return self
+
+    def __call__(self, fraction: float) -> None:
+        if self.progress is not None:
+            self.progress.update(self.task, completed=min(max(fraction, 0.0), 1.0))
+
+    def __exit__(self, *exc):
+        if self.progress is not None:
+            self.progress.__exit__(*exc)
+        return False
+
+
+def progress_fraction(description: str) -> _Fraction:
+    """``with progress_fraction("simulate") as update: update(0.5)`` — a bar on standard error."""
+    return _Fraction(description)

@@ -25,7 +25,11 @@ Per fluid particle i, over the current neighbours j within the support radius h:
 
 and between particles of different phases (fluid–tissue, fluid–bar,
 tissue–bar, tissue–wall, bar–wall) the coupling force of Eq. 18,
-``f = −K_c m_a m_b ∇W_ab``, a repulsion along the line between them. Eq. 19–20
+``f = −K_c m_a m_b ∇W_ab``, a repulsion along the line between them. Its
+kernel has a support of one particle spacing (``contact_support_factor``), not
+h: with h, particles resting one spacing apart — a tissue lying on the floor —
+would already push each other with most of the peak force, so the tissue
+would hover a spacing above the floor and jump at the first step. Eq. 19–20
 apply it as equal and opposite impulses (the paper prints both with a minus,
 which would not conserve momentum; the reaction's sign is restored). Solid
 contacts (not fluid) also carry a regularised Coulomb friction
@@ -115,15 +119,17 @@ def solid_pressure(x, n_fluid, table, counts, h, density, pressure, gravity):
 
 
 @njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
-def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, mu_fluid,
-                k_fluid, k_contact, friction, slip_speed, force):
+def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, h_contact, mu_fluid,
+                k_fluid, k_contact, friction, slip_speed, friction_damping_max, force):
     """Pressure (Eq. 11), viscosity (Eq. 12) and coupling (Eq. 18) forces (N).
 
     Rows of ``table`` are the neighbours of particles ``first, first + 1, …``; the
+    coupling of Eq. 18 uses the kernel with support ``h_contact`` (≤ h); the
     forces on them are *added* to ``force``. ``volume`` (m³) is m/ρ for water and the
     rest volume for solids; ``pressure`` (Pa) is the water's own or, for a solid, the
-    one extrapolated by :func:`solid_pressure`. Returns the largest contact force
-    magnitude seen (N).
+    one extrapolated by :func:`solid_pressure`. Friction's viscous regularisation is
+    capped at ``friction_damping_max`` (N·s/m), the stiffest the time step can take.
+    Returns the largest contact force magnitude seen (N).
     """
     n = counts.shape[0]
     biggest = np.zeros(n)
@@ -174,11 +180,11 @@ def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, mu
                 continue
             else:
                 kc = k_contact
-            if kc == 0.0:
+            if kc == 0.0 or r >= h_contact:
                 continue
             # Eq. 18: f_i = −K_c m_i m_j ∇W(x_i − x_j) = K_c m_i m_j dW/dr · r_vec / r;
             # dW/dr < 0, so the force points away from j (a repulsion)
-            c = kc * mass[i] * mass[j] * dw / r
+            c = kc * mass[i] * mass[j] * cubic_dw(r, h_contact) / r
             fx += c * r0
             fy += c * r1
             fz += c * r2
@@ -197,7 +203,7 @@ def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, mu
                 t1 = w1 - dn * uy
                 t2 = w2 - dn * uz
                 vt = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-                scale = friction * fn / max(vt, slip_speed)
+                scale = min(friction * fn / max(vt, slip_speed), friction_damping_max)
                 fx += scale * t0
                 fy += scale * t1
                 fz += scale * t2

@@ -143,13 +143,17 @@ class Solver:
         self.c_tissue = s.tissue.p_wave_speed(rho_t) if s.n_tissue else 0.0
         lam, _ = s.tissue.lame()
         self.lame = s.tissue.lame()
-        # stiffest contact spring: K_c m_a m_b max|d²W/dr²|, |W''| peaks at r = 0: 96/(π h⁵)
-        w2 = 96.0 / (math.pi * h ** 5)
-        m = s.mass[: s.n_moving]
-        m_max = float(m.max()) if len(m) else 1.0
-        m_min = float(m.min()) if len(m) else 1.0
-        k_spring = max(s.contact_coefficient, s.fluid_coefficient) * m_max * m_max * w2
-        self.dt_contact = math.sqrt(m_min / k_spring) if k_spring > 0 else math.inf
+        # stiffest contact spring on a particle: K_c m_other max|d²W/dr²| per unit of its own
+        # mass (Eq. 18 scales with both masses); |W''| peaks at r = 0: 96/(π h⁵)
+        self.h_contact = min(s.coupling.contact_support_factor * s.spacing_m, h)
+        w2 = 96.0 / (math.pi * self.h_contact ** 5)
+        m = s.mass
+        solid = s.phase != 0
+        m_solid = float(m[solid].max()) if solid.any() else 0.0
+        m_all = float(m.max()) if len(m) else 0.0
+        omega2 = (s.contact_coefficient * m_solid + s.fluid_coefficient * m_all) * w2
+        self.dt_contact = math.sqrt(1.0 / omega2) if omega2 > 0 else math.inf
+        self.m_light = float(m[: s.n_moving].min()) if s.n_moving else 1.0
         self.speed_limit = 2.0 * max(self.c_fluid, self.c_tissue, 1.0)
         self.mu_max = s.fluid.viscosity_pa_s if s.n_fluid else 0.0
         self.max_contact_force = 0.0
@@ -185,8 +189,9 @@ class Solver:
         c = s.coupling
         self.max_contact_force = fluid.pair_forces(
             s.x, s.v, s.mass, self.volume, s.phase, self.pressure, 0, table.indices, table.counts,
-            s.support_m, s.fluid.viscosity_pa_s, s.fluid_coefficient, s.contact_coefficient,
-            c.friction, c.slip_speed_m_s, self.force)
+            s.support_m, self.h_contact, s.fluid.viscosity_pa_s, s.fluid_coefficient, s.contact_coefficient,
+            c.friction, c.slip_speed_m_s, 0.25 * self.m_light * self.settings.mass_scaling / self.dt,
+            self.force)
         return self._tissue_forces()
 
     def _tissue_forces(self) -> np.ndarray:

@@ -50,24 +50,30 @@ class CouplingParameters:
     Attributes
     ----------
     fluid_coefficient
-        K_c (N·m⁴/kg²) of Eq. 18 between water and solids. ``None``: the largest pair force
-        equals the hydrostatic pressure at the tank floor on one particle face.
+        K_c (N·m⁴/kg²) of Eq. 18 between water and solids. Default 0: the water's
+        pressure already couples it to the solids (see :mod:`.fluid`), and adding the
+        penalty lifted a floating cube by 1.4 particle spacings in the buoyancy case;
+        ``None`` sets the largest pair force to the tank-floor pressure on one particle face.
     contact_coefficient
         K_c (N·m⁴/kg²) of Eq. 18 between solids (tissue–bar, tissue–floor, bar–floor).
-        ``None``: the largest pair force equals ``contact_pressure_factor`` × E × Δx².
+        ``None``: the largest pair force between a tissue particle and the heaviest solid
+        particle equals ``contact_pressure_factor`` × E × Δx².
     contact_pressure_factor
         See above (dimensionless).
     friction
         Coulomb friction coefficient between solids (dimensionless; 0 = frictionless).
     slip_speed_m_s
         Sliding speed below which friction is regularised (m/s).
+    contact_support_factor
+        Support of the Eq. 18 kernel, in particle spacings (see :mod:`.fluid`).
     """
 
-    fluid_coefficient: float | None = None
+    fluid_coefficient: float | None = 0.0
     contact_coefficient: float | None = None
     contact_pressure_factor: float = 4.0
     friction: float = 0.5
     slip_speed_m_s: float = 1e-4
+    contact_support_factor: float = 1.0
 
 
 @dataclass
@@ -245,7 +251,8 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
     if stiffness is None:
         c = 10.0 * math.sqrt(2.0 * float(np.linalg.norm(g)) * max(water_depth_m, dx))
         stiffness = max(c, 1.0) ** 2
-    dw_max = float(np.abs(kernel_derivative(np.array([h / 3.0]), h))[0])  # |dW/dr| peaks at q = 1/3
+    h_c = coupling.contact_support_factor * dx
+    dw_max = float(np.abs(kernel_derivative(np.array([h_c / 3.0]), h_c))[0])  # |dW/dr| peaks at q = 1/3
     m_t = float(mass[len(xf):len(xf) + len(xt)].mean()) if len(xt) else rho0 * cell
     m_f = rho0 * cell
     kc_fluid = coupling.fluid_coefficient
@@ -253,7 +260,10 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
         kc_fluid = rho0 * float(np.linalg.norm(g)) * max(water_depth_m, dx) * dx * dx / (m_f * m_t * dw_max)
     kc_contact = coupling.contact_coefficient
     if kc_contact is None:
-        kc_contact = coupling.contact_pressure_factor * tissue.youngs_modulus_pa * dx * dx / (m_t * m_t * dw_max)
+        # calibrated on the heaviest pair the tissue meets (usually tissue–bar): Eq. 18 scales
+        # with the product of the masses, so lighter pairs (tissue–floor) are softer
+        m_heavy = max([m_t] + [float(b.get("density_kg_m3", 7800.0)) * cell for b in bodies])
+        kc_contact = coupling.contact_pressure_factor * tissue.youngs_modulus_pa * dx * dx / (m_t * m_heavy * dw_max)
     rest = rest_neighbourhoods(xt, tissue.support_factor * dx, tissue.moment_floor,
                                tissue.mls_order) if len(xt) else None
     held = np.zeros((len(xt), 3), bool)

@@ -1,0 +1,295 @@
+"""Scenes as data: a water tank, a tissue resting on its floor and a pushing bar (TOML).
+
+Interface units are mm, s, kg/m³, Pa and N; :func:`build_scene` converts them to
+SI for the solver. The tank frame has y up (gravity along −y); the tank's inner
+box runs from (0, 0, 0) to ``tank.size_mm``. A minimal ``scene.toml``::
+
+    [tank]
+    size_mm = [60.0, 40.0, 40.0]
+    water_depth_mm = 30.0
+
+    [tissue]
+    shape = "ellipsoid"          # "ellipsoid", "box" or "particles" (a CSV from `hifumotion reconstruct`)
+    size_mm = [30.0, 18.0, 24.0]
+
+    [bar]
+    force_n = 0.25
+    ramp_s = 0.2
+
+    [run]
+    duration_s = 2.0
+    output_interval_s = 0.1
+
+``hifumotion simulate --print-scene`` prints every field with its unit.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, field_validator, model_validator
+
+from hifumotion.config import ConfigModel
+from hifumotion.errors import InputError
+from hifumotion.particles.elastic import TissueParameters
+from hifumotion.particles.rigid import piecewise_linear_schedule
+from hifumotion.particles.solver import SolverSettings
+from hifumotion.particles.system import (CouplingParameters, FluidParameters, ParticleSystem,
+                                         build_system, lattice, tank_walls)
+
+MM = 1e-3
+
+
+def _vector(v, name):
+    if len(v) != 3:
+        raise ValueError(f"{name} needs 3 values (x, y, z)")
+    return v
+
+
+class TankConfig(ConfigModel):
+    size_mm: tuple[float, float, float] = Field((60.0, 40.0, 40.0), description="inner size of the tank (x, y up, z) in mm")
+    water_depth_mm: float = Field(30.0, ge=0, description="height of the water above the floor in mm (0: no water)")
+    wall_layers: int = Field(2, ge=1, le=4, description="layers of wall particles")
+
+    @field_validator("size_mm")
+    @classmethod
+    def _positive(cls, v):
+        if any(s <= 0 for s in v):
+            raise ValueError("tank sizes must be positive (mm)")
+        return v
+
+
+class TissueConfig(ConfigModel):
+    shape: Literal["ellipsoid", "box", "particles"] = Field("ellipsoid", description="ellipsoid, box, or particles from a CSV")
+    size_mm: tuple[float, float, float] = Field((30.0, 18.0, 24.0), description="extent (x, y, z) of an ellipsoid or box in mm")
+    centre_mm: tuple[float, float, float] | None = Field(None, description="centre in the tank (mm); default: centred on the floor")
+    particles_csv: Path | None = Field(None, description="CSV with x_mm,y_mm,z_mm[,volume_mm3] (hifumotion reconstruct --particle-spacing)")
+    density_kg_m3: float = Field(1050.0, gt=0, description="tissue density in kg/m³")
+    youngs_modulus_pa: float = Field(13e3, gt=0, description="Young's modulus E in Pa (Table 3: 13 kPa)")
+    poisson_ratio: float = Field(0.47, gt=-1, lt=0.5, description="Poisson's ratio (Table 3: 0.47)")
+    beta1: float = Field(1.0, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
+    beta2: float = Field(0.5, description="rheological viscosity exponent β2 (Table 3: 0.5)")
+    volume_stiffness_pa: float = Field(0.0, ge=0, description="k_v of the volume-conservation force (Eq. 15–16) in Pa")
+    hourglass: float = Field(5.0, ge=0, description="hourglass control α (0: off)")
+    corotated: bool = Field(False, description="corotated linear elasticity instead of Saint-Venant–Kirchhoff")
+    mls_order: Literal[1, 2] = Field(2, description="MLS gradient: 1 (the paper's linear) or 2 (quadratic)")
+
+    @model_validator(mode="after")
+    def _source(self):
+        if self.shape == "particles" and self.particles_csv is None:
+            raise ValueError("shape 'particles' needs particles_csv")
+        return self
+
+    def parameters(self) -> TissueParameters:
+        return TissueParameters(youngs_modulus_pa=self.youngs_modulus_pa, poisson_ratio=self.poisson_ratio,
+                                volume_stiffness_pa=self.volume_stiffness_pa, beta1=self.beta1,
+                                beta2=self.beta2, hourglass=self.hourglass, corotated=self.corotated,
+                                mls_order=self.mls_order)
+
+
+class BarConfig(ConfigModel):
+    enabled: bool = Field(True, description="whether there is a pushing bar")
+    radius_mm: float = Field(2.5, gt=0, description="radius of the cylindrical bar in mm")
+    length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
+    direction: tuple[float, float, float] = Field((1.0, 0.0, 0.0), description="unit vector the bar points and pushes along")
+    tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: a spacing short of the tissue, at its mid-height")
+    density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
+    force_n: float = Field(0.25, description="pushing force held after the ramp, in N (Table 3: 0.25)")
+    ramp_s: float = Field(0.2, ge=0, description="time over which the force rises linearly from 0, in s")
+    schedule_times_s: list[float] | None = Field(None, description="explicit force schedule: times in s (overrides force_n/ramp_s)")
+    schedule_force_n: list[float] | None = Field(None, description="explicit force schedule: forces in N")
+
+    @model_validator(mode="after")
+    def _schedule(self):
+        if (self.schedule_times_s is None) != (self.schedule_force_n is None):
+            raise ValueError("give both schedule_times_s and schedule_force_n, or neither")
+        if self.schedule_times_s is not None:
+            piecewise_linear_schedule(self.schedule_times_s, self.schedule_force_n)
+        if np.linalg.norm(self.direction) == 0:
+            raise ValueError("direction must not be zero")
+        return self
+
+    def schedule(self):
+        if self.schedule_times_s is not None:
+            return piecewise_linear_schedule(self.schedule_times_s, self.schedule_force_n)
+        if self.ramp_s > 0:
+            return piecewise_linear_schedule([0.0, self.ramp_s], [0.0, self.force_n])
+        value = self.force_n
+        return lambda t: value
+
+
+class ParticleConfig(ConfigModel):
+    spacing_mm: float = Field(1.5, gt=0, description="particle spacing Δx in mm")
+    support_factor: float = Field(2.0, ge=1.5, le=3.0, description="kernel support radius h in spacings")
+
+
+class PhysicsConfig(ConfigModel):
+    gravity_m_s2: float = Field(9.80665, ge=0, description="gravitational acceleration in m/s²")
+    water_density_kg_m3: float = Field(1000.0, gt=0, description="rest density ρ0 of the water in kg/m³")
+    water_viscosity_pa_s: float = Field(0.02, ge=0, description="μ of Eq. 12 for the water in Pa·s")
+    sound_speed_m_s: float | None = Field(None, gt=0, description="numerical speed of sound of the water (√K) in m/s; default from the depth")
+    contact_coefficient: float | None = Field(None, ge=0, description="K_c of Eq. 18 between solids in N·m⁴/kg²; default from E")
+    fluid_coefficient: float = Field(0.0, ge=0, description="K_c of Eq. 18 between water and solids in N·m⁴/kg²")
+    friction: float = Field(0.5, ge=0, description="Coulomb friction between solids (tissue–floor, tissue–bar)")
+
+
+class RunConfig(ConfigModel):
+    duration_s: float = Field(2.0, gt=0, description="simulated time after settling, in s")
+    output_interval_s: float = Field(0.1, gt=0, description="time between written frames, in s")
+    settle_s: float = Field(0.3, ge=0, description="settling under gravity (damped, bar held) before t = 0, in s")
+    settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling, in 1/s")
+    mass_scaling: float = Field(1.0, ge=1.0, description="inertia multiplier for quasi-static runs (weights unchanged)")
+    cfl: float = Field(0.4, gt=0, le=1.0, description="safety factor on the time step")
+    write_vtu: bool = Field(True, description="write a VTU file per output frame")
+
+
+class Scene(ConfigModel):
+    """A scene: tank, tissue, bar, particles, physics and run settings."""
+
+    tank: TankConfig = TankConfig()
+    tissue: TissueConfig = TissueConfig()
+    bar: BarConfig = BarConfig()
+    particles: ParticleConfig = ParticleConfig()
+    physics: PhysicsConfig = PhysicsConfig()
+    run: RunConfig = RunConfig()
+
+
+def load_scene(path: str | Path) -> Scene:
+    """A :class:`Scene` from a TOML or YAML file (relative CSV paths are relative to it)."""
+    from hifumotion.config import load_config
+
+    scene = load_config(path, Scene)
+    if scene.tissue.particles_csv is not None and not scene.tissue.particles_csv.is_absolute():
+        scene.tissue.particles_csv = Path(path).parent / scene.tissue.particles_csv
+    return scene
+
+
+def read_particles_csv(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Positions (mm) and volumes (mm³, if present) from a particle CSV."""
+    if not Path(path).is_file():
+        raise InputError("no such particle file", path)
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except ValueError as exc:
+        raise InputError(f"cannot read particles ({exc})", path) from None
+    names = data.dtype.names or ()
+    if not {"x_mm", "y_mm", "z_mm"} <= set(names):
+        raise InputError("expected columns x_mm,y_mm,z_mm[,volume_mm3]", path)
+    data = np.atleast_1d(data)
+    pts = np.stack([data["x_mm"], data["y_mm"], data["z_mm"]], axis=1)
+    vol = np.asarray(data["volume_mm3"], float) if "volume_mm3" in names else None
+    if len(pts) == 0 or not np.all(np.isfinite(pts)):
+        raise InputError("has no particles or non-numeric positions", path)
+    return pts, vol
+
+
+def tissue_particles_mm(cfg: TissueConfig, tank: TankConfig, spacing_mm: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Tissue particle positions (mm, tank frame) and volumes (mm³)."""
+    if cfg.shape == "particles":
+        pts, vol = read_particles_csv(cfg.particles_csv)
+        if vol is None:
+            vol = np.full(len(pts), spacing_mm ** 3)
+        lo = pts.min(0)
+        hi = pts.max(0)
+        if cfg.centre_mm is None:
+            shift = np.array([tank.size_mm[0] / 2, 0.0, tank.size_mm[2] / 2]) - \
+                np.array([(lo[0] + hi[0]) / 2, lo[1] - spacing_mm / 2, (lo[2] + hi[2]) / 2])
+        else:
+            shift = np.asarray(cfg.centre_mm) - (lo + hi) / 2
+        return pts + shift, vol
+    size = np.asarray(cfg.size_mm, float)
+    centre = (np.array([tank.size_mm[0] / 2, size[1] / 2, tank.size_mm[2] / 2])
+              if cfg.centre_mm is None else np.asarray(cfg.centre_mm, float))
+    pts = lattice(centre - size / 2, centre + size / 2, spacing_mm)
+    if cfg.shape == "ellipsoid":
+        pts = pts[(((pts - centre) / (size / 2)) ** 2).sum(1) <= 1.0]
+        volume = math.pi / 6 * float(np.prod(size))
+    else:
+        volume = float(np.prod(size))
+    if len(pts) == 0:
+        raise InputError(f"no particle fits in the tissue at spacing {spacing_mm} mm", "tissue.size_mm")
+    return pts, np.full(len(pts), volume / len(pts))
+
+
+def bar_particles_mm(cfg: BarConfig, tissue_mm: np.ndarray, spacing_mm: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bar particles (mm), its unit axis and its tip (mm)."""
+    axis = np.asarray(cfg.direction, float)
+    axis /= np.linalg.norm(axis)
+    if cfg.tip_mm is None:
+        # a spacing short of the tissue's surface, along the axis through its centre height
+        centre = tissue_mm.mean(0)
+        along = (tissue_mm - centre) @ axis
+        tip = centre + (along.min() - 2.0 * spacing_mm) * axis
+        tip[1] = centre[1]
+    else:
+        tip = np.asarray(cfg.tip_mm, float)
+    r, length = cfg.radius_mm, cfg.length_mm
+    span = max(r, length) + spacing_mm
+    local = lattice([-span] * 3, [span] * 3, spacing_mm)
+    helper = np.array([0.0, 1.0, 0.0]) if abs(axis[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    t = local @ np.stack([axis, e1, e2], axis=1)  # coordinates along (axis, e1, e2)
+    keep = (t[:, 0] <= 0) & (t[:, 0] > -length) & (np.hypot(t[:, 1], t[:, 2]) <= r)
+    t = t[keep]
+    pts = tip + t[:, :1] * axis + t[:, 1:2] * e1 + t[:, 2:3] * e2
+    return pts, axis, tip
+
+
+def build_scene(scene: Scene) -> tuple[ParticleSystem, dict]:
+    """The particle system of a scene (SI) and facts about it (counts, masses, mm geometry)."""
+    dx_mm = scene.particles.spacing_mm
+    tank = scene.tank
+    tissue_mm, vol_mm3 = tissue_particles_mm(scene.tissue, tank, dx_mm)
+    size = np.asarray(tank.size_mm, float)
+    if np.any(tissue_mm < 0) or np.any(tissue_mm > size):
+        raise InputError("the tissue does not fit inside the tank", "tissue")
+    bodies = []
+    facts: dict = {"spacing_mm": dx_mm}
+    if scene.bar.enabled:
+        bar_mm, axis, tip = bar_particles_mm(scene.bar, tissue_mm, dx_mm)
+        if len(bar_mm) == 0:
+            raise InputError("the bar is thinner than one particle spacing", "bar.radius_mm")
+        bodies.append({"positions_m": bar_mm * MM, "density_kg_m3": scene.bar.density_kg_m3,
+                       "force_n": scene.bar.schedule(), "force_direction": axis, "axis": axis,
+                       "name": "bar"})
+        facts.update(bar_axis=axis.tolist(), bar_tip_mm=tip.tolist(), bar_particles=len(bar_mm))
+    water_mm = np.zeros((0, 3))
+    if tank.water_depth_mm > 0:
+        water_mm = lattice([0, 0, 0], [size[0], tank.water_depth_mm, size[2]], dx_mm)
+        solids = [tissue_mm] + ([bar_mm] if scene.bar.enabled else [])
+        from scipy.spatial import cKDTree
+
+        occupied = cKDTree(np.concatenate(solids))
+        d, _ = occupied.query(water_mm)
+        water_mm = water_mm[d >= 0.99 * dx_mm]
+    walls_mm = tank_walls([0, 0, 0], [size[0], size[1], size[2]], dx_mm, layers=tank.wall_layers)
+    ph = scene.physics
+    fluid = FluidParameters(rest_density_kg_m3=ph.water_density_kg_m3,
+                            stiffness_m2_s2=None if ph.sound_speed_m_s is None else ph.sound_speed_m_s ** 2,
+                            viscosity_pa_s=ph.water_viscosity_pa_s)
+    coupling = CouplingParameters(fluid_coefficient=ph.fluid_coefficient,
+                                  contact_coefficient=ph.contact_coefficient, friction=ph.friction)
+    system = build_system(spacing_m=dx_mm * MM, support_factor=scene.particles.support_factor,
+                          fluid_positions_m=water_mm * MM, tissue_positions_m=tissue_mm * MM,
+                          tissue_volumes_m3=vol_mm3 * MM ** 3, tissue_density_kg_m3=scene.tissue.density_kg_m3,
+                          bodies=bodies, wall_positions_m=walls_mm * MM, fluid=fluid,
+                          tissue=scene.tissue.parameters(), coupling=coupling,
+                          gravity_m_s2=(0.0, -ph.gravity_m_s2, 0.0),
+                          domain_lo_m=np.zeros(3) - 4 * dx_mm * MM, domain_hi_m=size * MM + 4 * dx_mm * MM,
+                          water_depth_m=max(tank.water_depth_mm, dx_mm) * MM)
+    facts.update(counts=dict(system.counts), tissue_mass_kg=float(system.mass[system.tissue_slice].sum()),
+                 tissue_volume_mm3=float(vol_mm3.sum()))
+    return system, facts
+
+
+def solver_settings(scene: Scene, settling: bool = False) -> SolverSettings:
+    run = scene.run
+    return SolverSettings(cfl=run.cfl, mass_scaling=run.mass_scaling,
+                          damping_per_s=run.settle_damping_per_s if settling else 0.0)
