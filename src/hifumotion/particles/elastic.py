@@ -119,6 +119,9 @@ class RestNeighbourhoods:
     ``neighbours[start[i]:start[i+1]]`` are i's rest neighbours, ``weight`` their
     w_ij (1/m³), ``gradient`` the MLS gradient weights d_ij (1/m: ∇u_i = Σ (u_j − u_i) d_ijᵀ)
     and ``reverse[k]`` the position of the pair (j, i) when ``k`` is the pair (i, j).
+    Each row is sorted by rest distance; ``start[i] … near_end[i] − 1`` are the pairs
+    closer than ``near_m`` (the SPH support h), where the pair forces (hourglass,
+    rheological viscosity) act.
     """
 
     start: np.ndarray
@@ -128,6 +131,8 @@ class RestNeighbourhoods:
     reverse: np.ndarray
     support_m: float
     order: int
+    near_end: np.ndarray
+    near_m: float
 
 
 def _quadratic_basis(xij: np.ndarray, scale: float) -> np.ndarray:
@@ -137,7 +142,7 @@ def _quadratic_basis(xij: np.ndarray, scale: float) -> np.ndarray:
 
 
 def rest_neighbourhoods(rest_m: np.ndarray, support_m: float, moment_floor: float = 1e-3,
-                        order: int = 2) -> RestNeighbourhoods:
+                        order: int = 2, near_m: float | None = None) -> RestNeighbourhoods:
     """Rest neighbourhoods and MLS gradient weights of particles at ``rest_m`` (m).
 
     ``order=1`` is the paper's linear moving least squares (Müller et al. 2004):
@@ -158,13 +163,16 @@ def rest_neighbourhoods(rest_m: np.ndarray, support_m: float, moment_floor: floa
     pairs = tree.query_pairs(support_m, output_type="ndarray")
     i = np.concatenate([pairs[:, 0], pairs[:, 1]]).astype(np.int64)
     j = np.concatenate([pairs[:, 1], pairs[:, 0]]).astype(np.int64)
-    order_idx = np.lexsort((j, i))
-    i, j = i[order_idx], j[order_idx]
+    dist = np.linalg.norm(x0[j] - x0[i], axis=1)
+    order_idx = np.lexsort((j, dist, i))
+    i, j, dist = i[order_idx], j[order_idx], dist[order_idx]
     start = np.zeros(n + 1, np.int64)
     np.add.at(start, i + 1, 1)
     start = np.cumsum(start)
+    near_m = support_m if near_m is None else float(near_m)
+    near_end = start[:-1] + np.bincount(i[dist < near_m], minlength=n).astype(np.int64)
     xij = x0[j] - x0[i]
-    w = kernel(np.linalg.norm(xij, axis=1), support_m)
+    w = kernel(dist, support_m)
     basis = xij / support_m if order == 1 else _quadratic_basis(xij, support_m)
     m = basis.shape[1]
     moment = np.zeros((n, m, m))
@@ -175,11 +183,12 @@ def rest_neighbourhoods(rest_m: np.ndarray, support_m: float, moment_floor: floa
     inv = np.einsum("nij,nj,nkj->nik", vecs, 1.0 / vals, vecs)
     inv[np.diff(start) == 0] = 0.0
     grad = np.einsum("kab,kb->ka", inv[i][:, :3, :], basis * w[:, None]) / support_m
-    # the reverse pair (j, i) of each pair (i, j): pairs are sorted by (i, j)
+    # the reverse pair (j, i) of each pair (i, j)
     key = i * n + j
-    reverse = np.searchsorted(key, j * n + i).astype(np.int64)
+    by_key = np.argsort(key)
+    reverse = by_key[np.searchsorted(key[by_key], j * n + i)].astype(np.int64)
     return RestNeighbourhoods(start, j, w, np.ascontiguousarray(grad), reverse,
-                              float(support_m), order)
+                              float(support_m), order, near_end, near_m)
 
 
 @njit(cache=True, inline="always")
@@ -326,16 +335,32 @@ def stress_pass(x, x0, first, start, nbr, grad_w, volume, lam, g, k_v, corotated
         strain[i] = math.sqrt(2.0 / 3.0 * dev)
 
 
+def pair_constants(rest: RestNeighbourhoods, rest_m: np.ndarray, volume_m3: np.ndarray,
+                   youngs_modulus_pa: float, hourglass: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pair constants of :func:`force_pass`: rest offsets X_ij (m) and the hourglass
+    coefficient ``−α/2 v_i v_j w_ij E / |X_ij|²`` (N/m²)."""
+    i = np.repeat(np.arange(len(rest.start) - 1), np.diff(rest.start))
+    offsets = np.ascontiguousarray(rest_m[rest.neighbours] - rest_m[i])
+    rest2 = (offsets ** 2).sum(1)
+    coef = -0.5 * hourglass * volume_m3[i] * volume_m3[rest.neighbours] * rest.weight * youngs_modulus_pa / rest2
+    return offsets, np.ascontiguousarray(coef)
+
+
 @njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
-def force_pass(x, v, x0, first, start, nbr, w, grad_w, reverse, volume, deform, b_mat, support,
-               youngs, hourglass, beta1, beta2, mu_max, rate_floor, force):
+def force_pass(x, v, first, start, near_end, nbr, offsets, hg_coef, grad_w, grad_rev, volume,
+               deform, b_mat, support, use_hourglass, beta1, beta2, mu_max, rate_floor, force):
     """Elastic (Eq. 14–16), hourglass and rheological viscous (Eq. 12) forces (N), gathered.
 
     Adds into ``force[first + i]``; returns the largest viscosity used (Pa·s), for the
-    viscous time-step limit.
+    viscous time-step limit. The pair forces use the pairs within ``support`` (the SPH
+    h: ``start … near_end``). ``offsets``/``hg_coef`` come from :func:`pair_constants`;
+    ``grad_rev[k]`` is d_ji for the pair k = (i, j) (``gradient[reverse]``, stored in
+    pair order so the loop reads memory in sequence).
     """
-    n = x0.shape[0]
+    n = start.shape[0] - 1
     mu_seen = np.zeros(n)
+    lap_coef = 45.0 / (math.pi * support ** 6)
+    sqrt_rate = beta2 == 0.5
     for i in prange(n):
         gi = first + i
         fx = 0.0
@@ -348,46 +373,45 @@ def force_pass(x, v, x0, first, start, nbr, w, grad_w, reverse, volume, deform, 
         for k in range(start[i], start[i + 1]):
             j = nbr[k]
             gj = first + j
-            wk = w[k]
             bj = b_mat[j]
-            X0 = x0[j, 0] - x0[i, 0]
-            X1 = x0[j, 1] - x0[i, 1]
-            X2 = x0[j, 2] - x0[i, 2]
             # v_i P_i d_ij (i's own energy) − v_j P_j d_ji (j's energy, which i is part of)
             a0 = grad_w[k, 0]
             a1 = grad_w[k, 1]
             a2 = grad_w[k, 2]
-            kr = reverse[k]
-            c0 = grad_w[kr, 0]
-            c1 = grad_w[kr, 1]
-            c2 = grad_w[kr, 2]
+            c0 = grad_rev[k, 0]
+            c1 = grad_rev[k, 1]
+            c2 = grad_rev[k, 2]
             fx += bi[0, 0] * a0 + bi[0, 1] * a1 + bi[0, 2] * a2 - (bj[0, 0] * c0 + bj[0, 1] * c1 + bj[0, 2] * c2)
             fy += bi[1, 0] * a0 + bi[1, 1] * a1 + bi[1, 2] * a2 - (bj[1, 0] * c0 + bj[1, 1] * c1 + bj[1, 2] * c2)
             fz += bi[2, 0] * a0 + bi[2, 1] * a1 + bi[2, 2] * a2 - (bj[2, 0] * c0 + bj[2, 1] * c1 + bj[2, 2] * c2)
-            if hourglass == 0.0 and beta1 == 0.0:
-                continue
+        if not use_hourglass and beta1 == 0.0:
+            force[gi, 0] += fx
+            force[gi, 1] += fy
+            force[gi, 2] += fz
+            continue
+        for k in range(start[i], near_end[i]):
+            j = nbr[k]
+            gj = first + j
             r0 = x[gj, 0] - x[gi, 0]
             r1 = x[gj, 1] - x[gi, 1]
             r2 = x[gj, 2] - x[gi, 2]
             r = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
             if r <= 0.0:
                 continue
-            if hourglass != 0.0:
+            if use_hourglass:
                 # δ = (J X − x)·x̂ at both ends of the pair (Ganzenmüller 2015)
+                X0 = offsets[k, 0]
+                X1 = offsets[k, 1]
+                X2 = offsets[k, 2]
                 fj = deform[j]
-                e0 = fi[0, 0] * X0 + fi[0, 1] * X1 + fi[0, 2] * X2 - r0
-                e1 = fi[1, 0] * X0 + fi[1, 1] * X1 + fi[1, 2] * X2 - r1
-                e2 = fi[2, 0] * X0 + fi[2, 1] * X1 + fi[2, 2] * X2 - r2
-                g0 = fj[0, 0] * X0 + fj[0, 1] * X1 + fj[0, 2] * X2 - r0
-                g1 = fj[1, 0] * X0 + fj[1, 1] * X1 + fj[1, 2] * X2 - r1
-                g2 = fj[2, 0] * X0 + fj[2, 1] * X1 + fj[2, 2] * X2 - r2
-                dsum = ((e0 + g0) * r0 + (e1 + g1) * r1 + (e2 + g2) * r2) / r
-                rest2 = X0 * X0 + X1 * X1 + X2 * X2
-                mag = -0.5 * hourglass * vol_i * volume[j] * wk * youngs / rest2 * dsum / r
+                e0 = (fi[0, 0] + fj[0, 0]) * X0 + (fi[0, 1] + fj[0, 1]) * X1 + (fi[0, 2] + fj[0, 2]) * X2 - 2.0 * r0
+                e1 = (fi[1, 0] + fj[1, 0]) * X0 + (fi[1, 1] + fj[1, 1]) * X1 + (fi[1, 2] + fj[1, 2]) * X2 - 2.0 * r1
+                e2 = (fi[2, 0] + fj[2, 0]) * X0 + (fi[2, 1] + fj[2, 1]) * X1 + (fi[2, 2] + fj[2, 2]) * X2 - 2.0 * r2
+                mag = hg_coef[k] * (e0 * r0 + e1 * r1 + e2 * r2) / (r * r)
                 fx += mag * r0
                 fy += mag * r1
                 fz += mag * r2
-            if beta1 != 0.0:
+            if beta1 != 0.0 and r < support:
                 v0 = v[gj, 0] - v[gi, 0]
                 v1 = v[gj, 1] - v[gi, 1]
                 v2 = v[gj, 2] - v[gi, 2]
@@ -397,12 +421,15 @@ def force_pass(x, v, x0, first, start, nbr, w, grad_w, reverse, volume, deform, 
                 rate = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) / (r * r)
                 if rate < rate_floor:
                     rate = rate_floor
-                mu = beta1 * rate ** beta2
+                if sqrt_rate:
+                    mu = beta1 * math.sqrt(rate)
+                else:
+                    mu = beta1 * math.exp(beta2 * math.log(rate))
                 if mu > mu_max:
                     mu = mu_max
                 if mu > mu_i:
                     mu_i = mu
-                sc = mu * vol_i * volume[j] * viscosity_laplacian(r, support)
+                sc = mu * vol_i * volume[j] * lap_coef * (support - r)
                 fx += sc * v0
                 fy += sc * v1
                 fz += sc * v2

@@ -152,7 +152,8 @@ class Solver:
         m_solid = float(m[solid].max()) if solid.any() else 0.0
         m_all = float(m.max()) if len(m) else 0.0
         omega2 = (s.contact_coefficient * m_solid + s.fluid_coefficient * m_all) * w2
-        self.dt_contact = math.sqrt(1.0 / omega2) if omega2 > 0 else math.inf
+        # a spring is stable for dt < 2/ω; the cfl factor leaves room for several contacts
+        self.dt_contact = 2.0 / math.sqrt(omega2) if omega2 > 0 else math.inf
         self.m_light = float(m[: s.n_moving].min()) if s.n_moving else 1.0
         self.speed_limit = 2.0 * max(self.c_fluid, self.c_tissue, 1.0)
         self.mu_max = s.fluid.viscosity_pa_s if s.n_fluid else 0.0
@@ -161,6 +162,10 @@ class Solver:
         self.needs_pairs = bool(s.n_fluid) or sum(
             1 for k in (s.n_tissue, s.n_rigid, s.n_wall) if k) > 1
         self.tissue_volume = np.ascontiguousarray(s.rest_volume[s.tissue_slice])
+        if s.rest is not None:
+            self.pair_offsets, self.hourglass_coef = elastic.pair_constants(
+                s.rest, s.tissue_rest, self.tissue_volume, s.tissue.youngs_modulus_pa, s.tissue.hourglass)
+            self.gradient_reverse = np.ascontiguousarray(s.rest.gradient[s.rest.reverse])
         self.b_mat = np.zeros((s.n_tissue, 3, 3))
         self.pressure = np.zeros(len(s.x))          # water's own, solids' extrapolated (Pa)
         self.volume = s.rest_volume.copy()           # m/ρ for water, rest volume for solids (m³)
@@ -206,11 +211,11 @@ class Solver:
                                 self.tissue_volume, self.lame[0], self.lame[1],
                                 t.volume_stiffness_pa, t.corotated, s.deform, b_mat, s.strain,
                                 self.work)
-            mu_t = elastic.force_pass(s.x, s.v, s.tissue_rest, first, r.start, r.neighbours, r.weight,
-                                      r.gradient, r.reverse,
-                                      self.tissue_volume, s.deform, b_mat, r.support_m,
-                                      t.youngs_modulus_pa, t.hourglass, t.beta1, t.beta2,
-                                      t.mu_max_pa_s, t.rate_floor_per_s, self.force)
+            mu_t = elastic.force_pass(s.x, s.v, first, r.start, r.near_end, r.neighbours, self.pair_offsets,
+                                      self.hourglass_coef, r.gradient, self.gradient_reverse,
+                                      self.tissue_volume,
+                                      s.deform, b_mat, r.near_m, t.hourglass != 0.0, t.beta1,
+                                      t.beta2, t.mu_max_pa_s, t.rate_floor_per_s, self.force)
             mu = max(mu, mu_t)
         self.mu_max = mu
         return self.force[: s.n_moving]

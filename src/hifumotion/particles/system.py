@@ -265,7 +265,7 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
         m_heavy = max([m_t] + [float(b.get("density_kg_m3", 7800.0)) * cell for b in bodies])
         kc_contact = coupling.contact_pressure_factor * tissue.youngs_modulus_pa * dx * dx / (m_t * m_heavy * dw_max)
     rest = rest_neighbourhoods(xt, tissue.support_factor * dx, tissue.moment_floor,
-                               tissue.mls_order) if len(xt) else None
+                               tissue.mls_order, near_m=h) if len(xt) else None
     held = np.zeros((len(xt), 3), bool)
     if tissue_fixed is not None:
         tf = np.asarray(tissue_fixed, bool)
