@@ -189,3 +189,111 @@ def test_validation_hydrostatic_pressure():
 
     r = run_case("hydrostatic")
     assert r.passed, r.details
+
+
+# -- sections, scenes, output, command line -------------------------------------------
+def test_section_of_a_particle_sphere_is_a_disc_of_its_radius():
+    from hifumotion.particles.section import Plane, section
+
+    dx = 1.0
+    pts = lattice([-10, -10, -10], [10, 10, 10], dx)
+    pts = pts[np.linalg.norm(pts, axis=1) <= 8.0]
+    radius = (3 * len(pts) * dx ** 3 / (4 * math.pi)) ** (1 / 3)  # sphere of the same volume
+    plane = Plane(origin_mm=(-15.0, -15.0, 0.0), u=(1.0, 0.0, 0.0), v=(0.0, 1.0, 0.0),
+                  shape=(150, 150), pixel_mm=0.2)
+    sec = section(pts + np.array([0, 0, 0.5]), np.full(len(pts), dx ** 3), dx, plane)
+    assert sec.area_mm2 == pytest.approx(math.pi * radius ** 2, rel=0.05)
+    centre = sec.contour_mm.mean(0) - 15.0
+    assert np.abs(centre).max() < 0.1
+    empty = section(pts + 100.0, np.full(len(pts), 1.0), dx, plane)
+    assert not empty.mask.any() and len(empty.contour_px) == 0
+
+
+def _tiny_scene():
+    from hifumotion.particles.scene import Scene
+
+    scene = Scene()
+    scene.particles.spacing_mm = 2.5
+    scene.tank.size_mm = (40.0, 25.0, 30.0)
+    scene.tank.water_depth_mm = 10.0
+    scene.tissue.size_mm = (16.0, 10.0, 14.0)
+    scene.bar.radius_mm = 3.0
+    scene.bar.length_mm = 8.0
+    scene.bar.force_n = 0.004
+    scene.bar.ramp_s = 0.02
+    scene.run.duration_s = 0.06
+    scene.run.output_interval_s = 0.03
+    scene.run.settle_s = 0.02
+    return scene
+
+
+def test_simulated_push_moves_the_bar_along_its_axis_and_writes_paraview_files(tmp_path):
+    import meshio
+
+    from hifumotion.particles.simulate import simulate
+
+    result = simulate(_tiny_scene(), tmp_path)
+    assert len(result.times_s) == 3 and result.times_s[-1] == pytest.approx(0.06)
+    bar = result.bar_centre_mm
+    assert bar[-1, 0] > bar[0, 0] + 0.01  # pushed along +x
+    assert np.abs(bar[:, 1:] - bar[0, 1:]).max() < 1e-9  # and only along its axis
+    frame = meshio.read(tmp_path / "frames" / "frame_0002.vtu")
+    assert {"type", "velocity_mm_s", "pressure_pa", "strain", "displacement_mm"} <= set(frame.point_data)
+    assert len(frame.points) == result.system.n_moving
+    pvd = (tmp_path / "frames.pvd").read_text()
+    assert pvd.count("<DataSet") == 3 and "frame_0002.vtu" in pvd
+    rows = (tmp_path / "bar_pose.csv").read_text().strip().splitlines()
+    assert len(rows) == 4 and rows[0].startswith("frame,time_s,body")
+    # the water stays in the tank and the tissue stays on the floor
+    x = result.system.x[: result.system.n_moving] * 1000
+    assert x[:, 1].min() > -1.0
+    tissue_bottom = result.tissue_mm[-1][:, 1].min()
+    assert 0.0 < tissue_bottom < 2.5
+
+
+def test_scene_file_errors_name_the_field(tmp_path):
+    from hifumotion.errors import InputError
+    from hifumotion.particles.scene import load_scene
+
+    bad = tmp_path / "scene.toml"
+    bad.write_text("[tissue]\npoisson_ratio = 0.7\n")
+    with pytest.raises(InputError, match="tissue.poisson_ratio"):
+        load_scene(bad)
+    bad.write_text('[tissue]\nshape = "particles"\nparticles_csv = "nope.csv"\n')
+    from hifumotion.particles.scene import build_scene
+
+    with pytest.raises(InputError, match="nope.csv"):
+        build_scene(load_scene(bad))
+
+
+def test_command_line_simulate_and_validate(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "hifumotion", *args], capture_output=True, text=True,
+                              timeout=300, cwd=tmp_path)
+
+    printed = run("simulate", "--print-scene")
+    assert printed.returncode == 0 and "youngs_modulus_pa = 13000.0" in printed.stdout
+    scene = tmp_path / "scene.toml"
+    text = printed.stdout
+    for key, value in [("spacing_mm = 1.5", "spacing_mm = 2.5"), ("duration_s = 2.0", "duration_s = 0.03"),
+                       ("settle_s = 0.3", "settle_s = 0.01"), ("size_mm = [60.0, 40.0, 40.0]", "size_mm = [40.0, 25.0, 30.0]"),
+                       ("size_mm = [30.0, 18.0, 24.0]", "size_mm = [16.0, 10.0, 14.0]"),
+                       ("water_depth_mm = 30.0", "water_depth_mm = 10.0"), ("output_interval_s = 0.1", "output_interval_s = 0.03")]:
+        assert key in text
+        text = text.replace(key, value)
+    scene.write_text(text)
+    done = run("-q", "simulate", str(scene), "-o", "out")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "out" / "frames.pvd").exists() and (tmp_path / "out" / "run_info.json").exists()
+    again = run("simulate", str(scene), "-o", "out")
+    assert again.returncode == 2 and "--overwrite" in again.stderr
+    checked = run("validate", "rotation", "--json")
+    assert checked.returncode == 0
+    result = json.loads(checked.stdout)
+    assert result["passed"] and {"parameters", "measured", "reference", "rel_error"} <= set(result)
+    wrong = run("validate", "nonsense")
+    assert wrong.returncode == 2 and "choose from" in wrong.stderr
