@@ -297,3 +297,24 @@ def test_command_line_simulate_and_validate(tmp_path):
     assert result["passed"] and {"parameters", "measured", "reference", "rel_error"} <= set(result)
     wrong = run("validate", "nonsense")
     assert wrong.returncode == 2 and "choose from" in wrong.stderr
+
+
+def test_scene_tissue_from_reconstructed_particles_rests_on_the_floor(tmp_path):
+    from hifumotion.particles.scene import Scene, build_scene
+
+    pts = lattice([-6, -4, -5], [6, 4, 5], 2.0)
+    pts = pts[(((pts) / [6, 4, 5]) ** 2).sum(1) <= 1] + [100.0, 50.0, -20.0]  # any frame the user had
+    rows = "\n".join(f"{x},{y},{z},7.5,0" for x, y, z in pts)
+    csv = tmp_path / "particles.csv"
+    csv.write_text("x_mm,y_mm,z_mm,volume_mm3,surface\n" + rows + "\n")
+    scene = Scene()
+    scene.tissue.particles_csv = csv
+    scene.tissue.shape = "particles"
+    scene.particles.spacing_mm = 2.0
+    scene.tank.water_depth_mm = 0.0
+    system, facts = build_scene(scene)
+    assert facts["counts"]["tissue"] == len(pts)
+    assert facts["tissue_volume_mm3"] == pytest.approx(7.5 * len(pts))
+    tissue = system.x[system.tissue_slice] * 1000
+    assert tissue[:, 1].min() == pytest.approx(1.0)  # half a spacing above the floor
+    assert np.allclose(tissue[:, [0, 2]].mean(0), [30.0, 20.0], atol=1.0)  # centred in the tank

@@ -48,7 +48,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from hifumotion.particles._numba import FLUID, WALL
+from hifumotion.particles._numba import FLUID, RIGID, WALL
 from hifumotion.particles.kernels import cubic_dw, cubic_w, viscosity_laplacian
 
 
@@ -176,7 +176,7 @@ def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, h_
                 if pi_phase == WALL or pj_phase == WALL:
                     continue  # water and tank: pressure only
                 kc = k_fluid
-            elif pi_phase == pj_phase:
+            elif pi_phase == pj_phase and pi_phase != RIGID:
                 continue
             else:
                 kc = k_contact

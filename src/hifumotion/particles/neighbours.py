@@ -57,7 +57,7 @@ def _counting_sort(cid, ncell):
 
 
 @njit(cache=True, parallel=True)
-def _fill_table(x, q0, q1, lo, inv_cell, dims, start, order, h, table, counts):
+def _fill_table(x, q0, q1, lo, inv_cell, dims, start, order, h, group, table, counts):
     h2 = h * h
     width = table.shape[1]
     for row in prange(q1 - q0):
@@ -81,7 +81,7 @@ def _fill_table(x, q0, q1, lo, inv_cell, dims, start, order, h, table, counts):
                     c = (z * dims[1] + y) * dims[0] + xx
                     for k in range(start[c], start[c + 1]):
                         j = order[k]
-                        if j == i:
+                        if j == i or (group[i] >= 0 and group[j] == group[i]):
                             continue
                         d0 = x[j, 0] - x[i, 0]
                         d1 = x[j, 1] - x[i, 1]
@@ -144,19 +144,27 @@ class CellGrid:
         limit = 0.5 * self.skin * self.h / (1.0 + self.skin)
         return _max_displacement(x_m, self.built_at) > limit
 
-    def query(self, x_m: np.ndarray, first: int, last: int) -> NeighbourTable:
-        """Neighbours (within ``h (1 + skin)``) of particles ``first … last − 1`` among all of ``x_m``."""
+    def query(self, x_m: np.ndarray, first: int, last: int, group: np.ndarray | None = None
+              ) -> NeighbourTable:
+        """Neighbours (within ``h (1 + skin)``) of particles ``first … last − 1`` among all of ``x_m``.
+
+        With ``group`` (one int per particle), a particle of group g ≥ 0 does not list
+        particles of its own group (a solid's own particles, which interact otherwise);
+        group −1 lists everything.
+        """
         x = np.ascontiguousarray(x_m, np.float64)
         self.built_at = x[:last].copy()
         cid = _cell_index(x, self.lo, self.inv_cell, self.dims)
         start, order = _counting_sort(cid, int(np.prod(self.dims)))
         n = max(last - first, 0)
+        if group is None:
+            group = np.full(len(x), -1, np.int64)
         while True:
             table = np.empty((n, self.width), np.int64)
             counts = np.zeros(n, np.int64)
             if n:
                 _fill_table(x, first, last, self.lo, self.inv_cell, self.dims, start, order,
-                            self.h, table, counts)
+                            self.h, group, table, counts)
             most = int(counts.max()) if n else 0
             if most <= self.width:
                 return NeighbourTable(first, table, counts)

@@ -151,7 +151,10 @@ class Solver:
         solid = s.phase != 0
         m_solid = float(m[solid].max()) if solid.any() else 0.0
         m_all = float(m.max()) if len(m) else 0.0
-        omega2 = (s.contact_coefficient * m_solid + s.fluid_coefficient * m_all) * w2
+        solid_kinds = sum(1 for k in (s.n_tissue, s.n_wall) if k) + len(s.bodies)
+        contact = s.contact_coefficient if solid_kinds > 1 else 0.0
+        wetted = s.fluid_coefficient if s.n_fluid and (s.n_tissue or s.n_rigid) else 0.0
+        omega2 = (contact * m_solid + wetted * m_all) * w2
         # a spring is stable for dt < 2/ω; the cfl factor leaves room for several contacts
         self.dt_contact = 2.0 / math.sqrt(omega2) if omega2 > 0 else math.inf
         self.m_light = float(m[: s.n_moving].min()) if s.n_moving else 1.0
@@ -166,12 +169,43 @@ class Solver:
             self.pair_offsets, self.hourglass_coef = elastic.pair_constants(
                 s.rest, s.tissue_rest, self.tissue_volume, s.tissue.youngs_modulus_pa, s.tissue.hourglass)
             self.gradient_reverse = np.ascontiguousarray(s.rest.gradient[s.rest.reverse])
+            self.dt_tissue = self._tissue_stability_limit()
+        else:
+            self.dt_tissue = math.inf
         self.b_mat = np.zeros((s.n_tissue, 3, 3))
         self.pressure = np.zeros(len(s.x))          # water's own, solids' extrapolated (Pa)
         self.volume = s.rest_volume.copy()           # m/ρ for water, rest volume for solids (m³)
         self.work = np.zeros((s.n_tissue, 4, 3, 3))
         self.rigid_slice = s.slice_of(2)
+        # solids skip their own phase in the pair lists (their internal forces are elsewhere);
+        # each rigid body is its own group, so two bars would still touch
+        self.group = np.where(s.phase == 0, -1, s.phase.astype(np.int64) * 1_000_000)
+        for k, b in enumerate(s.bodies):
+            self.group[b.first:b.first + b.count] += k
         self.dt = self._step_size(0.0)
+
+    def _tissue_stability_limit(self) -> float:
+        """2/ω_max of the tissue's springs (s), particle by particle.
+
+        A particle's elastic stiffness is about (λ + 2G) v Σ|d|² over the gradient
+        weights of its own and its neighbours' fits (a Gershgorin bound), plus its
+        hourglass springs (2 |coef| per pair). Where the MLS fit is poorly conditioned
+        (corners, thin parts) this exceeds the lattice estimate Δx/c_P by up to 2×,
+        which is what destabilised a thin beam before this limit was added.
+        """
+        s = self.system
+        r = s.rest
+        rows = np.repeat(np.arange(s.n_tissue), np.diff(r.start))
+        g2 = (r.gradient ** 2).sum(1)
+        lam, g = self.lame
+        modulus = lam + 2 * g + s.tissue.volume_stiffness_pa
+        vol = self.tissue_volume
+        elastic_k = modulus * (vol * np.bincount(rows, g2, s.n_tissue)
+                               + np.bincount(r.neighbours, g2 * vol[rows], s.n_tissue))
+        near = np.arange(len(rows)) < r.near_end[rows]
+        hourglass_k = np.bincount(rows[near], 2 * np.abs(self.hourglass_coef[near]), s.n_tissue)
+        omega2 = (elastic_k + hourglass_k) / s.mass[s.tissue_slice]
+        return 2.0 / math.sqrt(float(omega2.max())) if omega2.max() > 0 else math.inf
 
     # -- forces -----------------------------------------------------------
     def compute_forces(self) -> np.ndarray:
@@ -182,7 +216,7 @@ class Solver:
         if not self.needs_pairs:
             return self._tissue_forces()
         if self.table is None or self.grid.stale(s.x[:n]):
-            self.table = self.grid.query(s.x, 0, n)
+            self.table = self.grid.query(s.x, 0, n, self.group)
         table = self.table
         if s.n_fluid:
             fluid.fluid_density(s.x, s.mass, s.rest_volume, s.phase, s.n_fluid, table.indices,
@@ -230,11 +264,12 @@ class Solver:
         if s.n_fluid:
             limits.append(dx / (self.c_fluid / sc + v_max))
         if s.n_tissue:
-            limits.append(dx / (self.c_tissue / sc + v_max))
+            limits.append(dx / (self.c_tissue / sc + v_max))  # advection; waves: dt_tissue
         rho_min = min(s.fluid.rest_density_kg_m3, s.tissue_density_kg_m3() or math.inf)
         if self.mu_max > 0:
             limits.append(0.25 * rho_min * st.mass_scaling * dx * dx / self.mu_max)
         limits.append(self.dt_contact * sc)
+        limits.append(self.dt_tissue * sc)
         if v_max == 0 and not (s.n_fluid or s.n_tissue):
             limits.append(dx / max(self.speed_limit, 1.0))
         return st.cfl * min(limits)
