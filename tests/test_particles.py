@@ -318,3 +318,45 @@ def test_scene_tissue_from_reconstructed_particles_rests_on_the_floor(tmp_path):
     tissue = system.x[system.tissue_slice] * 1000
     assert tissue[:, 1].min() == pytest.approx(1.0)  # half a spacing above the floor
     assert np.allclose(tissue[:, [0, 2]].mean(0), [30.0, 20.0], atol=1.0)  # centred in the tank
+
+
+def test_validation_buoyancy_light_floats_at_archimedes_draft_dense_sinks():
+    from hifumotion.particles.validation import run_case
+
+    r = run_case("buoyancy")
+    assert r.passed, r.details
+    assert r.details["draft_error_in_spacings"] < 1.0
+    assert r.details["dense_bottom_above_floor_m"] < r.parameters["spacing_m"]
+
+
+def test_validation_plate_period():
+    from hifumotion.particles.validation import run_case
+
+    r = run_case("plate")
+    assert r.passed, r  # within 10 % of the thin-plate period
+    assert len(r.details["zero_crossings_s"]) >= 2
+
+
+def test_validation_cantilever_deflection_is_measured_against_beam_theory():
+    """Measured: 11–14 % more deflection than Euler–Bernoulli at 5 particles through the
+    thickness, shrinking with resolution (8.8 % at 8); the 5 % target needs ≈ 12 particles
+    through the thickness (docs/decisions.md). The test pins the measured band so a
+    regression — or an improvement that should update the documentation — shows."""
+    from hifumotion.particles.validation import run_case
+
+    r = run_case("cantilever")
+    assert r.measured > r.reference  # a particle beam is softer, never stiffer, here
+    assert r.rel_error < 0.18, r
+    history = r.details["deflection_history_m"]
+    assert abs(history[-1] - history[-2]) < 1e-3 * history[-1]  # relaxed to equilibrium
+
+
+def test_validation_hertz_contact_is_measured():
+    """Measured: the contact force Hertz gives for the measured indentation is ~30 % below
+    the applied one at R = 6 spacings (contact radius ≈ 1.5 spacings); the 10 % target needs
+    R ≳ 20 spacings. Pinned as a band, like the cantilever."""
+    from hifumotion.particles.validation import run_case
+
+    r = run_case("hertz")
+    assert 0.3 * r.parameters["radius_m"] * 0.08 < r.details["indentation_m"] < 1.2 * 0.08 * r.parameters["radius_m"]
+    assert r.rel_error < 0.45, r

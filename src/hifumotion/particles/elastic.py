@@ -91,7 +91,7 @@ class TissueParameters:
     beta2: float = 0.5
     mu_max_pa_s: float = 50.0
     rate_floor_per_s: float = 1e-3
-    hourglass: float = 5.0
+    hourglass: float = 1.0
     corotated: bool = False
     moment_floor: float = 1e-4
     mls_order: int = 2

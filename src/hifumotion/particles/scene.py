@@ -73,7 +73,7 @@ class TissueConfig(ConfigModel):
     beta1: float = Field(1.0, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
     beta2: float = Field(0.5, description="rheological viscosity exponent β2 (Table 3: 0.5)")
     volume_stiffness_pa: float = Field(0.0, ge=0, description="k_v of the volume-conservation force (Eq. 15–16) in Pa")
-    hourglass: float = Field(5.0, ge=0, description="hourglass control α (0: off)")
+    hourglass: float = Field(1.0, ge=0, description="hourglass control α (0: off)")
     corotated: bool = Field(False, description="corotated linear elasticity instead of Saint-Venant–Kirchhoff")
     mls_order: Literal[1, 2] = Field(2, description="MLS gradient: 1 (the paper's linear) or 2 (quadratic)")
 
