@@ -361,3 +361,39 @@ def test_validation_hertz_contact_is_measured():
     r = run_case("hertz")
     assert 0.3 * r.parameters["radius_m"] * 0.08 < r.details["indentation_m"] < 1.2 * 0.08 * r.parameters["radius_m"]
     assert r.rel_error < 0.45, r
+
+
+@pytest.mark.parametrize("how, message", [("nan", r"\[17\].*not a number"),
+                                          ("away", r"\[17,.*left the domain")])
+def test_nan_or_escaped_particle_stops_the_run_naming_it(how, message):
+    rest, dx = _slab((5, 5, 5))
+    system = build_system(spacing_m=dx, tissue_positions_m=rest, gravity_m_s2=(0, 0, 0),
+                          tissue=TissueParameters(beta1=0.0))
+    solver = Solver(system)
+    system.v[17] = (np.nan, 0.0, 0.0) if how == "nan" else (1.0, 0.0, 0.0)
+    if how == "away":
+        system.x[17] += 1.0  # a metre outside the box (its neighbours are flung out too)
+    with pytest.raises(SimulationDiverged, match=rf"step 1 .*particle\(s\) {message}"):
+        solver.step()
+
+
+def test_mass_scaling_leaves_the_resting_state_unchanged():
+    """Inertia ×25, weight unchanged: a block sagging on its clamped base must come to
+    the same equilibrium (gravity and elasticity only), with a 5× longer step."""
+    rest, dx = _slab((6, 6, 6))
+    base = rest[:, 1] < dx
+    finals, steps = [], []
+    for scale in (1.0, 25.0):
+        system = build_system(spacing_m=dx, tissue_positions_m=rest, tissue_fixed=base,
+                              tissue=TissueParameters(youngs_modulus_pa=2e3, beta1=0.0))
+        c = system.tissue.p_wave_speed(1050.0)
+        omega = 2 * math.pi * c / (4 * 6 * dx)
+        solver = Solver(system, SolverSettings(mass_scaling=scale, damping_per_s=omega / math.sqrt(scale),
+                                               max_step_s=1.0))
+        steps.append(solver.dt)
+        solver.run(25 * math.sqrt(scale) / omega)
+        finals.append(system.x.copy())
+    sag = np.abs(finals[0] - rest).max()
+    assert sag > 1e-5  # it did sag
+    assert np.abs(finals[1] - finals[0]).max() < 1e-3 * sag + 1e-9
+    assert steps[1] / steps[0] == pytest.approx(5.0, rel=0.02)

@@ -272,7 +272,7 @@ class Solver:
         limits.append(self.dt_tissue * sc)
         if v_max == 0 and not (s.n_fluid or s.n_tissue):
             limits.append(dx / max(self.speed_limit, 1.0))
-        return st.cfl * min(limits)
+        return min(st.cfl * min(limits[1:]), st.max_step_s)
 
     def step(self) -> float:
         """Advance one step; returns its size (s)."""
@@ -319,17 +319,22 @@ class Solver:
             bad = np.flatnonzero(~np.all(np.isfinite(s.x[: s.n_moving]) & np.isfinite(s.v[: s.n_moving]), axis=1))
             reason = "position or velocity is not a number"
         elif why == 2:
-            bad = np.flatnonzero(np.any((s.x[: s.n_moving] < self.lo) | (s.x[: s.n_moving] > self.hi), axis=1))
+            x = s.x[: s.n_moving]
+            excess = np.maximum(self.lo - x, x - self.hi).max(axis=1)
+            bad = np.flatnonzero(excess > 0)
+            bad = bad[np.argsort(-excess[bad])]  # furthest out first
             reason = (f"left the domain [{', '.join(f'{v:.4g}' for v in self.lo)}] – "
                       f"[{', '.join(f'{v:.4g}' for v in self.hi)}] m")
         else:
             bad = np.flatnonzero(self.speed2 > self.speed_limit ** 2)
+            bad = bad[np.argsort(-self.speed2[bad])]  # fastest first
             reason = (f"moves faster than {self.speed_limit:.3g} m/s (twice the fastest sound speed: "
                       "energy blow-up)")
         shown = ", ".join(str(b) for b in bad[:8]) + (" …" if len(bad) > 8 else "")
         raise SimulationDiverged(
-            f"step {s.step} (t = {s.time_s:.6g} s): {len(bad)} particle(s) [{shown}], first a "
-            f"{kind} particle, {reason}; try a smaller cfl, a larger support or softer coupling")
+            f"step {s.step} (t = {s.time_s:.6g} s): {len(bad)} particle(s) [{shown}], worst a "
+            f"{PHASE_NAMES[int(s.phase[bad[0]])] if len(bad) else kind} particle, {reason}; "
+            "try a smaller cfl, a larger support or softer coupling")
 
     def run(self, duration_s: float, callback=None, every_s: float | None = None) -> None:
         """Advance by ``duration_s``; ``callback(solver)`` every ``every_s`` of simulated time."""
