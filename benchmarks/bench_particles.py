@@ -6,7 +6,9 @@ counts (within a few %) — an ellipsoidal tissue 30 × 18 × 24 mm on the floor
 a small tank, a shallow pool, a steel bar — settles it briefly, then times
 ``--steps`` solver steps of the push. Printed: particle counts, steps per
 second, simulated seconds per wall second (real-time factor), time per step
-and peak memory. Target (issue 6): ≥ 100 steps/s on 2 cores. For reference
+and peak memory. Target (issue 6): ≥ 100 steps/s on 2 cores (measured: 115–125
+with Numba's default OpenMP layer on an idle machine; 82–84 with the workqueue
+layer; see docs/decisions.md for shared cores). For reference
 (not run here): SPlisHSPlasH's DFSPH with Becker elasticity ran ≈ 28 steps/s
 for 6,270 particles on this kind of machine.
 

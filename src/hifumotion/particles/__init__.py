@@ -6,7 +6,6 @@ SI units inside (m, kg, s, Pa, N). Modules: :mod:`.kernels` (cubic spline),
 :mod:`.solver` (time stepping).
 """
 
-from hifumotion.particles import _numba  # noqa: F401  (threading layer first)
 from hifumotion.particles._numba import FLUID, RIGID, TISSUE, WALL
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.rigid import RigidBody, piecewise_linear_schedule

@@ -1,20 +1,16 @@
-"""Numba set-up shared by the particle kernels.
+"""Numba set-up shared by the particle kernels, and the phase codes.
 
-Numba's default OpenMP threading layer slowed several-fold here when the two
-cores were shared with another process; the ``workqueue`` layer held up, so it
-is chosen unless the user set ``NUMBA_THREADING_LAYER`` (docs/decisions.md).
-It must be chosen before the first parallel kernel runs, hence this module is
-imported first by :mod:`hifumotion.particles`.
+Threading: Numba's default layer (OpenMP where present) is kept. Measured on the
+paper-sized scene (2 cores, benchmarks/bench_particles.py): alone, OpenMP ran
+115–125 steps/s and the ``workqueue`` layer 82–84; with two simulations at once,
+OpenMP fell to 28 steps/s each and workqueue held 50. So a single run uses both
+cores with OpenMP, and work that runs several simulations side by side (Dask
+workers, pytest-xdist) gives each process one thread (``NUMBA_NUM_THREADS=1``),
+which is also the fastest way to run independent simulations. A user can still
+choose with ``NUMBA_THREADING_LAYER`` (docs/decisions.md).
 """
 
 from __future__ import annotations
-
-import os
-
-import numba
-
-if "NUMBA_THREADING_LAYER" not in os.environ:
-    numba.config.THREADING_LAYER = "workqueue"
 
 # Phases (particle kinds); particles of one phase are stored contiguously.
 FLUID = 0
