@@ -5,8 +5,8 @@ SI for the solver. The tank frame has y up (gravity along −y); the tank's inne
 box runs from (0, 0, 0) to ``tank.size_mm``. A minimal ``scene.toml``::
 
     [tank]
-    size_mm = [60.0, 40.0, 40.0]
-    water_depth_mm = 30.0
+    size_mm = [50.0, 40.0, 40.0]
+    water_depth_mm = 24.0
 
     [tissue]
     shape = "ellipsoid"          # "ellipsoid", "box" or "particles" (a CSV from `hifumotion reconstruct`)
@@ -17,8 +17,8 @@ box runs from (0, 0, 0) to ``tank.size_mm``. A minimal ``scene.toml``::
     ramp_s = 0.2
 
     [run]
-    duration_s = 2.0
-    output_interval_s = 0.1
+    duration_s = 1.0
+    output_interval_s = 0.05
 
 ``hifumotion simulate --print-scene`` prints every field with its unit.
 """
@@ -50,8 +50,8 @@ def _vector(v, name):
 
 
 class TankConfig(ConfigModel):
-    size_mm: tuple[float, float, float] = Field((60.0, 40.0, 40.0), description="inner size of the tank (x, y up, z) in mm")
-    water_depth_mm: float = Field(30.0, ge=0, description="height of the water above the floor in mm (0: no water)")
+    size_mm: tuple[float, float, float] = Field((50.0, 40.0, 40.0), description="inner size of the tank (x, y up, z) in mm")
+    water_depth_mm: float = Field(24.0, ge=0, description="height of the water above the floor in mm (0: no water)")
     wall_layers: int = Field(2, ge=1, le=4, description="layers of wall particles")
 
     @field_validator("size_mm")
@@ -92,10 +92,10 @@ class TissueConfig(ConfigModel):
 
 class BarConfig(ConfigModel):
     enabled: bool = Field(True, description="whether there is a pushing bar")
-    radius_mm: float = Field(2.5, gt=0, description="radius of the cylindrical bar in mm")
+    radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar (its flat pushing end) in mm")
     length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
-    direction: tuple[float, float, float] = Field((1.0, 0.0, 0.0), description="unit vector the bar points and pushes along")
-    tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: a spacing short of the tissue, at its mid-height")
+    direction: tuple[float, float, float] = Field((0.0, -1.0, 0.0), description="unit vector the bar points and pushes along (default: down onto the tissue)")
+    tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: two spacings short of the tissue, on the axis through its centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
     force_n: float = Field(0.25, description="pushing force held after the ramp, in N (Table 3: 0.25)")
     ramp_s: float = Field(0.2, ge=0, description="time over which the force rises linearly from 0, in s")
@@ -137,9 +137,9 @@ class PhysicsConfig(ConfigModel):
 
 
 class RunConfig(ConfigModel):
-    duration_s: float = Field(2.0, gt=0, description="simulated time after settling, in s")
-    output_interval_s: float = Field(0.1, gt=0, description="time between written frames, in s")
-    settle_s: float = Field(0.3, ge=0, description="settling under gravity (damped, bar held) before t = 0, in s")
+    duration_s: float = Field(1.0, gt=0, description="simulated time after settling, in s")
+    output_interval_s: float = Field(0.05, gt=0, description="time between written frames, in s")
+    settle_s: float = Field(0.2, ge=0, description="settling under gravity (damped, bar held) before t = 0, in s")
     settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling, in 1/s")
     mass_scaling: float = Field(1.0, ge=1.0, description="inertia multiplier for quasi-static runs (weights unchanged)")
     cfl: float = Field(0.4, gt=0, le=1.0, description="safety factor on the time step")
@@ -221,11 +221,10 @@ def bar_particles_mm(cfg: BarConfig, tissue_mm: np.ndarray, spacing_mm: float
     axis = np.asarray(cfg.direction, float)
     axis /= np.linalg.norm(axis)
     if cfg.tip_mm is None:
-        # a spacing short of the tissue's surface, along the axis through its centre height
+        # two spacings short of the tissue's surface, on the axis through its centre
         centre = tissue_mm.mean(0)
         along = (tissue_mm - centre) @ axis
         tip = centre + (along.min() - 2.0 * spacing_mm) * axis
-        tip[1] = centre[1]
     else:
         tip = np.asarray(cfg.tip_mm, float)
     r, length = cfg.radius_mm, cfg.length_mm
