@@ -1,13 +1,15 @@
 """Elastic tissue with rheological viscosity (the paper's Eq. 12–16; Müller et al. 2004).
 
 Total Lagrangian: every tissue particle keeps the neighbours it had at rest
-(within the support radius ``h``) and their rest offsets ``X_ij = X_j − X_i``.
-Per particle i (all sums over its rest neighbours j, w_ij = W(|X_ij|, h)):
+(within the support radius, 2.5 Δx by default) and their rest offsets
+``X_ij = X_j − X_i``. Per particle i (sums over its rest neighbours j):
 
-* moment matrix ``A_i = Σ X_ij X_ijᵀ w_ij`` and ``d_ij = A_i⁻¹ X_ij w_ij``
-  (moving least squares, Eq. 14's bracketed terms). ``A_i`` is inverted with
-  its eigenvalues floored at ``moment_floor`` × the largest, so thin or
-  coplanar neighbourhoods stay well posed (the regularised moment matrix);
+* gradient weights ``d_ij`` of a moving-least-squares fit (Eq. 14's
+  bracketed terms): the paper's linear fit ``d_ij = A_i⁻¹ X_ij w_ij`` with
+  ``A_i = Σ X_ij X_ijᵀ w_ij``, or (default) the linear part of a quadratic fit,
+  see :func:`rest_neighbourhoods`. Moment matrices are inverted with their
+  eigenvalues floored at ``moment_floor`` × the largest, so thin or coplanar
+  neighbourhoods stay well posed (the regularised moment matrix);
 * displacement gradient ``∇u_i = Σ (u_j − u_i) d_ijᵀ``, deformation gradient
   ``J_i = I + ∇u_i`` (the paper's Jacobian);
 * Green–Saint-Venant strain ``ε = ½ (JᵀJ − I)`` (Eq. 13; see below for the ½),
@@ -19,8 +21,8 @@ Per particle i (all sums over its rest neighbours j, w_ij = W(|X_ij|, h)):
 
 The elastic force of Eq. 14 is the gradient of that energy. It acts on j as
 ``−v_i P_i d_ij`` and on i as ``+v_i P_i Σ_j d_ij``; gathering both halves
-onto particle i gives ``f_i = Σ_j w_ij (B_i + B_j) X_ij`` with
-``B = v P A⁻¹`` — pairwise equal and opposite, so momentum is conserved.
+onto particle i gives ``f_i = Σ_j (v_i P_i d_ij − v_j P_j d_ji)`` — pairwise
+equal and opposite, so momentum is conserved, and no scatter is needed.
 
 Options (switchable, defaults in :class:`TissueParameters`):
 
@@ -50,7 +52,6 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from hifumotion.particles.kernels import cubic_w, viscosity_laplacian
 
 
 @dataclass(frozen=True)

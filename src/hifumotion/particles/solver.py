@@ -13,9 +13,10 @@ One step, in this order:
 7. checks: a NaN, a particle leaving the domain or faster than the stability
    limit stops the run with :class:`SimulationDiverged` naming the step, the
    particles and the limit;
-8. next step size: the smallest of the CFL limit of water and tissue (sound
-   speeds), the viscous limit, the acceleration limit and the contact-spring
-   limit, times ``cfl``.
+8. next step size: ``cfl`` × the smallest of the water's and the tissue's
+   CFL limits (sound speed + fastest particle), the viscous limit, the
+   contact-spring limit and the tissue's per-particle spring limit, capped at
+   ``max_step_s``.
 
 ``mass_scaling`` s > 1 multiplies every particle's *inertia* (not its weight):
 statics — gravity, buoyancy, pressure, elastic equilibrium — are unchanged,
@@ -141,7 +142,6 @@ class Solver:
         rho_t = s.tissue_density_kg_m3() or s.fluid.rest_density_kg_m3
         self.c_fluid = math.sqrt(s.fluid_stiffness_m2_s2) if s.n_fluid else 0.0
         self.c_tissue = s.tissue.p_wave_speed(rho_t) if s.n_tissue else 0.0
-        lam, _ = s.tissue.lame()
         self.lame = s.tissue.lame()
         # stiffest contact spring on a particle: K_c m_other max|d²W/dr²| per unit of its own
         # mass (Eq. 18 scales with both masses); |W''| peaks at r = 0: 96/(π h⁵)
@@ -162,7 +162,7 @@ class Solver:
         self.mu_max = s.fluid.viscosity_pa_s if s.n_fluid else 0.0
         self.max_contact_force = 0.0
         # pair forces only act between different phases or within the water
-        self.needs_pairs = bool(s.n_fluid) or sum(
+        self.needs_pairs = bool(s.n_fluid) or len(s.bodies) > 1 or sum(
             1 for k in (s.n_tissue, s.n_rigid, s.n_wall) if k) > 1
         self.tissue_volume = np.ascontiguousarray(s.rest_volume[s.tissue_slice])
         if s.rest is not None:
