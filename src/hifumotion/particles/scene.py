@@ -137,7 +137,7 @@ class PhysicsConfig(ConfigModel):
 
 
 class RunConfig(ConfigModel):
-    duration_s: float = Field(1.0, gt=0, description="simulated time after settling, in s")
+    duration_s: float = Field(1.0, gt=0, description="simulated time after settling, in s (rounded down to whole output intervals)")
     output_interval_s: float = Field(0.05, gt=0, description="time between written frames, in s")
     settle_s: float = Field(0.2, ge=0, description="settling under gravity (damped, bar held) before t = 0, in s")
     settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling, in 1/s")
