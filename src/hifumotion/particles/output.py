@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 
 from hifumotion.io.files import atomic_path, write_text
-from hifumotion.particles._numba import PHASE_NAMES, RIGID, TISSUE
 from hifumotion.particles.system import ParticleSystem
 
 M_TO_MM = 1000.0
@@ -101,4 +100,4 @@ class FrameWriter:
         write_text(self.folder / "bar_pose.csv", header + "\n" + "\n".join(self.pose_rows) + "\n")
 
 
-__all__ = ["FrameWriter", "write_points_vtu", "frame_data", "PHASE_NAMES", "TISSUE", "RIGID"]
+__all__ = ["FrameWriter", "write_points_vtu", "frame_data"]

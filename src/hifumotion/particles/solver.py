@@ -160,7 +160,6 @@ class Solver:
         self.m_light = float(m[: s.n_moving].min()) if s.n_moving else 1.0
         self.speed_limit = 2.0 * max(self.c_fluid, self.c_tissue, 1.0)
         self.mu_max = s.fluid.viscosity_pa_s if s.n_fluid else 0.0
-        self.max_contact_force = 0.0
         # pair forces only act between different phases or within the water
         self.needs_pairs = bool(s.n_fluid) or len(s.bodies) > 1 or sum(
             1 for k in (s.n_tissue, s.n_rigid, s.n_wall) if k) > 1
@@ -226,7 +225,7 @@ class Solver:
                                  s.density, self.pressure, s.gravity_m_s2)
             s.pressure[:] = self.pressure[: s.n_fluid]
         c = s.coupling
-        self.max_contact_force = fluid.pair_forces(
+        fluid.pair_forces(
             s.x, s.v, s.mass, self.volume, s.phase, self.pressure, 0, table.indices, table.counts,
             s.support_m, self.h_contact, s.fluid.viscosity_pa_s, s.fluid_coefficient, s.contact_coefficient,
             c.friction, c.slip_speed_m_s, 0.25 * self.m_light * self.settings.mass_scaling / self.dt,
