@@ -136,7 +136,7 @@ def test_pressure_force_of_a_linear_pressure_field_is_its_gradient():
     pressure = gradient * (0.02 - x[:, 1])
     force = np.zeros_like(x)
     fluid.pair_forces(system.x, system.v, system.mass, system.rest_volume.copy(), system.phase, pressure,
-                      0, table.indices, table.counts, system.support_m, dx, 0.0, 0.0, 0.0, 0.0, 1e-4, 1.0,
+                      0, table.indices, table.counts, system.support_m, dx, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-4, 1.0,
                       force)
     inner = np.all((x > 0.006) & (x < 0.014), axis=1)
     per_volume = force[inner] / dx ** 3

@@ -90,7 +90,7 @@ class TissueParameters:
     volume_stiffness_pa: float = 0.0
     beta1: float = 1.0
     beta2: float = 0.5
-    mu_max_pa_s: float = 50.0
+    mu_max_pa_s: float = 1e7
     rate_floor_per_s: float = 1e-3
     hourglass: float = 1.0
     corotated: bool = False

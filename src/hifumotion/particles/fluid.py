@@ -120,11 +120,13 @@ def solid_pressure(x, n_fluid, table, counts, h, density, pressure, gravity):
 
 @njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, h_contact, mu_fluid,
-                k_fluid, k_contact, friction, slip_speed, friction_damping_max, force):
+                k_fluid, k_wall, k_contact, friction, slip_speed, friction_damping_max, force):
     """Pressure (Eq. 11), viscosity (Eq. 12) and coupling (Eq. 18) forces (N).
 
     Rows of ``table`` are the neighbours of particles ``first, first + 1, …``; the
-    coupling of Eq. 18 uses the kernel with support ``h_contact`` (≤ h); the
+    coupling of Eq. 18 uses the kernel with support ``h_contact`` (≤ h), with
+    ``k_fluid`` between water and solids, ``k_wall`` between water and the tank and
+    ``k_contact`` between solids; the
     forces on them are *added* to ``force``. ``volume`` (m³) is m/ρ for water and the
     rest volume for solids; ``pressure`` (Pa) is the water's own or, for a solid, the
     one extrapolated by :func:`solid_pressure`. Friction's viscous regularisation is
@@ -173,8 +175,17 @@ def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, h_
                         fy += t * (v[j, 1] - v[i, 1])
                         fz += t * (v[j, 2] - v[i, 2])
                     continue
+                # water and tank: pressure, and a penalty that only acts closer than one
+                # spacing (¾ of it), so that water squeezed under a solid cannot be pushed through
                 if pi_phase == WALL or pj_phase == WALL:
-                    continue  # water and tank: pressure only
+                    hw = 0.75 * h_contact  # untouched by hydrostatic compression (≪ 25 %)
+                    if k_wall == 0.0 or r >= hw:
+                        continue
+                    c = k_wall * mass[i] * mass[j] * cubic_dw(r, hw) / r
+                    fx += c * r0
+                    fy += c * r1
+                    fz += c * r2
+                    continue
                 kc = k_fluid
             elif pi_phase == pj_phase and pi_phase != RIGID:
                 continue

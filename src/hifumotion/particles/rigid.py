@@ -88,6 +88,9 @@ class RigidBody:
         The body does not move (it still feels forces, reported as reaction).
     prescribed_velocity_m_s
         If set, the body moves at this velocity whatever the forces.
+    weight_supported
+        Gravity does not act on the body (a hand or a guide carries its weight), so the
+        applied force alone pushes what it touches.
     """
 
     first: int
@@ -102,6 +105,7 @@ class RigidBody:
     axis: np.ndarray | None = None
     fixed: bool = False
     prescribed_velocity_m_s: np.ndarray | None = None
+    weight_supported: bool = False
     name: str = "bar"
     last_particle_force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
@@ -167,8 +171,8 @@ class RigidBody:
         total = particle_forces_n.sum(0)
         self.last_particle_force_n = total
         torque = np.cross(arm, particle_forces_n).sum(0)           # Eq. 17
-        total = total + self.mass_kg * np.asarray(gravity_m_s2) \
-            + self.force_n(time_s) * self.force_direction
+        weight = 0.0 if self.weight_supported else self.mass_kg
+        total = total + weight * np.asarray(gravity_m_s2) + self.force_n(time_s) * self.force_direction
         if self.fixed:
             return
         if self.prescribed_velocity_m_s is not None:

@@ -53,6 +53,7 @@ class TankConfig(ConfigModel):
     size_mm: tuple[float, float, float] = Field((50.0, 40.0, 40.0), description="inner size of the tank (x, y up, z) in mm")
     water_depth_mm: float = Field(24.0, ge=0, description="height of the water above the floor in mm (0: no water)")
     wall_layers: int = Field(2, ge=1, le=4, description="layers of wall particles")
+    wall_height_mm: float | None = Field(None, gt=0, description="height of the wall particles in mm; default: the water line + 3 spacings (nothing above the water touches the walls, and walls cost neighbour work)")
 
     @field_validator("size_mm")
     @classmethod
@@ -62,32 +63,38 @@ class TankConfig(ConfigModel):
         return v
 
 
-class TissueConfig(ConfigModel):
-    shape: Literal["ellipsoid", "box", "particles"] = Field("ellipsoid", description="ellipsoid, box, or particles from a CSV")
-    size_mm: tuple[float, float, float] = Field((30.0, 18.0, 24.0), description="extent (x, y, z) of an ellipsoid or box in mm")
-    centre_mm: tuple[float, float, float] | None = Field(None, description="centre in the tank (mm); default: centred on the floor")
-    particles_csv: Path | None = Field(None, description="CSV with x_mm,y_mm,z_mm[,volume_mm3] (hifumotion reconstruct --particle-spacing)")
+class TissueMaterial(ConfigModel):
+    """The tissue's material (Table 3's parameters and the model's options)."""
+
     density_kg_m3: float = Field(1050.0, gt=0, description="tissue density in kg/m³")
     youngs_modulus_pa: float = Field(13e3, gt=0, description="Young's modulus E in Pa (Table 3: 13 kPa)")
     poisson_ratio: float = Field(0.47, gt=-1, lt=0.5, description="Poisson's ratio (Table 3: 0.47)")
     beta1: float = Field(1.0, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
     beta2: float = Field(0.5, description="rheological viscosity exponent β2 (Table 3: 0.5)")
+    rate_floor_per_s: float = Field(1e-3, gt=0, description="floor of the shear rate in the rheological viscosity μ = β1 max(rate, floor)^β2, in 1/s")
     volume_stiffness_pa: float = Field(0.0, ge=0, description="k_v of the volume-conservation force (Eq. 15–16) in Pa")
     hourglass: float = Field(1.0, ge=0, description="hourglass control α (0: off)")
     corotated: bool = Field(False, description="corotated linear elasticity instead of Saint-Venant–Kirchhoff")
     mls_order: Literal[1, 2] = Field(2, description="MLS gradient: 1 (the paper's linear) or 2 (quadratic)")
+
+    def parameters(self) -> TissueParameters:
+        return TissueParameters(youngs_modulus_pa=self.youngs_modulus_pa, poisson_ratio=self.poisson_ratio,
+                                volume_stiffness_pa=self.volume_stiffness_pa, beta1=self.beta1,
+                                beta2=self.beta2, rate_floor_per_s=self.rate_floor_per_s,
+                                hourglass=self.hourglass, corotated=self.corotated, mls_order=self.mls_order)
+
+
+class TissueConfig(TissueMaterial):
+    shape: Literal["ellipsoid", "box", "particles"] = Field("ellipsoid", description="ellipsoid, box, or particles from a CSV")
+    size_mm: tuple[float, float, float] = Field((30.0, 18.0, 24.0), description="extent (x, y, z) of an ellipsoid or box in mm")
+    centre_mm: tuple[float, float, float] | None = Field(None, description="centre in the tank (mm); default: centred on the floor")
+    particles_csv: Path | None = Field(None, description="CSV with x_mm,y_mm,z_mm[,volume_mm3] (hifumotion reconstruct --particle-spacing)")
 
     @model_validator(mode="after")
     def _source(self):
         if self.shape == "particles" and self.particles_csv is None:
             raise ValueError("shape 'particles' needs particles_csv")
         return self
-
-    def parameters(self) -> TissueParameters:
-        return TissueParameters(youngs_modulus_pa=self.youngs_modulus_pa, poisson_ratio=self.poisson_ratio,
-                                volume_stiffness_pa=self.volume_stiffness_pa, beta1=self.beta1,
-                                beta2=self.beta2, hourglass=self.hourglass, corotated=self.corotated,
-                                mls_order=self.mls_order)
 
 
 class BarConfig(ConfigModel):
@@ -97,6 +104,7 @@ class BarConfig(ConfigModel):
     direction: tuple[float, float, float] = Field((0.0, -1.0, 0.0), description="unit vector the bar points and pushes along (default: down onto the tissue)")
     tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: two spacings short of the tissue, on the axis through its centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
+    weight_supported: bool = Field(True, description="the hand holding the bar carries its weight, so the push on the tissue is force_n alone")
     force_n: float = Field(0.25, description="pushing force held after the ramp, in N (Table 3: 0.25)")
     ramp_s: float = Field(0.2, ge=0, description="time over which the force rises linearly from 0, in s")
     schedule_times_s: list[float] | None = Field(None, description="explicit force schedule: times in s (overrides force_n/ramp_s)")
@@ -132,6 +140,7 @@ class PhysicsConfig(ConfigModel):
     water_viscosity_pa_s: float = Field(0.02, ge=0, description="μ of Eq. 12 for the water in Pa·s")
     sound_speed_m_s: float | None = Field(None, gt=0, description="numerical speed of sound of the water (√K) in m/s; default from the depth")
     contact_coefficient: float | None = Field(None, ge=0, description="K_c of Eq. 18 between solids in N·m⁴/kg²; default from E")
+    contact_pressure_factor: float = Field(4.0, gt=0, description="default K_c makes the largest tissue–bar pair force this × E × Δx²")
     fluid_coefficient: float = Field(0.0, ge=0, description="K_c of Eq. 18 between water and solids in N·m⁴/kg²")
     friction: float = Field(0.5, ge=0, description="Coulomb friction between solids (tissue–floor, tissue–bar)")
 
@@ -143,7 +152,9 @@ class RunConfig(ConfigModel):
     settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling, in 1/s")
     mass_scaling: float = Field(1.0, ge=1.0, description="inertia multiplier for quasi-static runs (weights unchanged)")
     cfl: float = Field(0.4, gt=0, le=1.0, description="safety factor on the time step")
-    write_vtu: bool = Field(True, description="write a VTU file per output frame")
+    max_step_s: float = Field(1e-3, gt=0, description="largest time step in s")
+    write_vtu: bool = Field(True, description="write VTU files of the particles (with a PVD index)")
+    vtu_every: int = Field(1, ge=1, description="write every n-th output frame as VTU")
 
 
 class Scene(ConfigModel):
@@ -257,7 +268,7 @@ def build_scene(scene: Scene) -> tuple[ParticleSystem, dict]:
             raise InputError("the bar is thinner than one particle spacing", "bar.radius_mm")
         bodies.append({"positions_m": bar_mm * MM, "density_kg_m3": scene.bar.density_kg_m3,
                        "force_n": scene.bar.schedule(), "force_direction": axis, "axis": axis,
-                       "name": "bar"})
+                       "weight_supported": scene.bar.weight_supported, "name": "bar"})
         facts.update(bar_axis=axis.tolist(), bar_tip_mm=tip.tolist(), bar_particles=len(bar_mm))
     water_mm = np.zeros((0, 3))
     if tank.water_depth_mm > 0:
@@ -268,13 +279,17 @@ def build_scene(scene: Scene) -> tuple[ParticleSystem, dict]:
         occupied = cKDTree(np.concatenate(solids))
         d, _ = occupied.query(water_mm)
         water_mm = water_mm[d >= 0.99 * dx_mm]
-    walls_mm = tank_walls([0, 0, 0], [size[0], size[1], size[2]], dx_mm, layers=tank.wall_layers)
+    wall_top = (tank.wall_height_mm if tank.wall_height_mm is not None
+                else tank.water_depth_mm + 3 * dx_mm)
+    walls_mm = tank_walls([0, 0, 0], [size[0], min(wall_top, size[1]), size[2]], dx_mm,
+                          layers=tank.wall_layers)
     ph = scene.physics
     fluid = FluidParameters(rest_density_kg_m3=ph.water_density_kg_m3,
                             stiffness_m2_s2=None if ph.sound_speed_m_s is None else ph.sound_speed_m_s ** 2,
                             viscosity_pa_s=ph.water_viscosity_pa_s)
     coupling = CouplingParameters(fluid_coefficient=ph.fluid_coefficient,
-                                  contact_coefficient=ph.contact_coefficient, friction=ph.friction)
+                                  contact_coefficient=ph.contact_coefficient,
+                                  contact_pressure_factor=ph.contact_pressure_factor, friction=ph.friction)
     system = build_system(spacing_m=dx_mm * MM, support_factor=scene.particles.support_factor,
                           fluid_positions_m=water_mm * MM, tissue_positions_m=tissue_mm * MM,
                           tissue_volumes_m3=vol_mm3 * MM ** 3, tissue_density_kg_m3=scene.tissue.density_kg_m3,
@@ -290,5 +305,5 @@ def build_scene(scene: Scene) -> tuple[ParticleSystem, dict]:
 
 def solver_settings(scene: Scene, settling: bool = False) -> SolverSettings:
     run = scene.run
-    return SolverSettings(cfl=run.cfl, mass_scaling=run.mass_scaling,
+    return SolverSettings(cfl=run.cfl, mass_scaling=run.mass_scaling, max_step_s=run.max_step_s,
                           damping_per_s=run.settle_damping_per_s if settling else 0.0)

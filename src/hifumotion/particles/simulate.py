@@ -84,7 +84,7 @@ def simulate(scene: Scene, folder: str | Path | None = None,
         times.append(system.time_s)
         tissue.append(system.x[system.tissue_slice] * 1000.0)
         bar.append(system.bodies[0].centre_m * 1000.0 if system.bodies else np.full(3, np.nan))
-        if writer is not None:
+        if writer is not None and (len(times) - 1) % run.vtu_every == 0:
             writer.write(system, solver.pressure)
         if progress is not None:
             progress(len(times) / n_frames)
@@ -92,6 +92,7 @@ def simulate(scene: Scene, folder: str | Path | None = None,
     record()
     solver.run((n_frames - 1) * run.output_interval_s, callback=record, every_s=run.output_interval_s)
     facts["settling_steps"] = settled_steps
+    facts["excluded_water_particles"] = solver.excluded_water
     return SimulationResult(np.asarray(times), np.asarray(tissue),
                             system.rest_volume[system.tissue_slice] * 1e9, np.asarray(bar),
                             scene.particles.spacing_mm, system.step - settled_steps, facts, system)

@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from hifumotion.errors import HifuError
-from hifumotion.particles import elastic, fluid
+from hifumotion.particles import elastic, fluid, viscosity
 from hifumotion.particles.kernels import cubic_w
 from hifumotion.particles.neighbours import CellGrid
 from hifumotion.particles.system import ParticleSystem
@@ -64,6 +64,10 @@ class SolverSettings:
         Velocity components held at zero for every particle (e.g. ``(2,)``: plane strain in x–y).
     neighbour_skin
         Verlet skin of the neighbour lists, as a fraction of h (rebuilt when stale).
+    implicit_viscosity
+        Integrate the tissue's rheological viscosity by backward Euler
+        (:mod:`.viscosity`): no viscous step limit, so creep over seconds is affordable.
+        ``False`` takes it explicitly with the viscous limit ρ Δx²/(4 μ).
     """
 
     cfl: float = 0.4
@@ -73,6 +77,7 @@ class SolverSettings:
     damping_per_s: float = 0.0
     frozen_axes: tuple[int, ...] = ()
     neighbour_skin: float = 0.15
+    implicit_viscosity: bool = True
 
 
 @njit(cache=True, parallel=True)
@@ -139,6 +144,7 @@ class Solver:
         self.frozen = np.zeros(3, np.bool_)
         self.frozen[list(settings.frozen_axes)] = True
         self.speed2 = np.zeros(s.n_moving)
+        self.excluded_water = 0                       # water particles parked after leaving the domain
         rho_t = s.tissue_density_kg_m3() or s.fluid.rest_density_kg_m3
         self.c_fluid = math.sqrt(s.fluid_stiffness_m2_s2) if s.n_fluid else 0.0
         self.c_tissue = s.tissue.p_wave_speed(rho_t) if s.n_tissue else 0.0
@@ -154,7 +160,8 @@ class Solver:
         solid_kinds = sum(1 for k in (s.n_tissue, s.n_wall) if k) + len(s.bodies)
         contact = s.contact_coefficient if solid_kinds > 1 else 0.0
         wetted = s.fluid_coefficient if s.n_fluid and (s.n_tissue or s.n_rigid) else 0.0
-        omega2 = (contact * m_solid + wetted * m_all) * w2
+        walled = s.wall_coefficient if s.n_fluid and s.n_wall else 0.0
+        omega2 = (contact * m_solid + wetted * m_all) * w2 + walled * m_all * w2 / 0.75 ** 5
         # a spring is stable for dt < 2/ω; the cfl factor leaves room for several contacts
         self.dt_contact = 2.0 / math.sqrt(omega2) if omega2 > 0 else math.inf
         self.m_light = float(m[: s.n_moving].min()) if s.n_moving else 1.0
@@ -172,6 +179,12 @@ class Solver:
         else:
             self.dt_tissue = math.inf
         self.b_mat = np.zeros((s.n_tissue, 3, 3))
+        self.viscous_coef = np.zeros(len(s.rest.neighbours) if s.rest is not None else 0)
+        self.tissue_mu_max = 0.0                     # largest rheological μ of the last step (Pa·s)
+        self.viscous_iterations = 0                  # CG iterations of the last implicit solve
+        tissue = s.tissue_slice
+        self.tissue_inertia = np.ascontiguousarray(s.mass[tissue] * settings.mass_scaling)
+        self.tissue_free = (~self.held[tissue]).astype(np.float64)
         self.pressure = np.zeros(len(s.x))          # water's own, solids' extrapolated (Pa)
         self.volume = s.rest_volume.copy()           # m/ρ for water, rest volume for solids (m³)
         self.work = np.zeros((s.n_tissue, 4, 3, 3))
@@ -227,7 +240,8 @@ class Solver:
         c = s.coupling
         fluid.pair_forces(
             s.x, s.v, s.mass, self.volume, s.phase, self.pressure, 0, table.indices, table.counts,
-            s.support_m, self.h_contact, s.fluid.viscosity_pa_s, s.fluid_coefficient, s.contact_coefficient,
+            s.support_m, self.h_contact, s.fluid.viscosity_pa_s, s.fluid_coefficient, s.wall_coefficient,
+            s.contact_coefficient,
             c.friction, c.slip_speed_m_s, 0.25 * self.m_light * self.settings.mass_scaling / self.dt,
             self.force)
         return self._tissue_forces()
@@ -244,10 +258,16 @@ class Solver:
                                 self.tissue_volume, self.lame[0], self.lame[1],
                                 t.volume_stiffness_pa, t.corotated, s.deform, b_mat, s.strain,
                                 self.work)
+            implicit = self.settings.implicit_viscosity and t.beta1 != 0.0
+            if implicit:  # coefficients from the start-of-step state; forces in step()
+                self.tissue_mu_max = viscosity.pair_coefficients(
+                    s.x, s.v, first, r.start, r.near_end, r.neighbours, self.tissue_volume, r.near_m,
+                    t.beta1, t.beta2, t.mu_max_pa_s, t.rate_floor_per_s, self.viscous_coef)
             mu_t = elastic.force_pass(s.x, s.v, first, r.start, r.near_end, r.neighbours, self.pair_offsets,
                                       self.hourglass_coef, r.gradient, self.gradient_reverse,
                                       self.tissue_volume,
-                                      s.deform, b_mat, r.near_m, t.hourglass != 0.0, t.beta1,
+                                      s.deform, b_mat, r.near_m, t.hourglass != 0.0,
+                                      0.0 if implicit else t.beta1,
                                       t.beta2, t.mu_max_pa_s, t.rate_floor_per_s, self.force)
             mu = max(mu, mu_t)
         self.mu_max = mu
@@ -283,6 +303,13 @@ class Solver:
         rigid = self.rigid_slice
         _integrate(s.x, s.v, self.force, s.mass, n, s.gravity_m_s2, st.mass_scaling,
                    st.damping_per_s, dt, self.held, self.held_velocity, self.frozen, self.speed2)
+        if st.implicit_viscosity and s.tissue.beta1 != 0.0 and s.rest is not None and s.n_tissue:
+            r = s.rest
+            tissue = s.tissue_slice
+            self.viscous_iterations = viscosity.implicit_update(
+                s.x, s.v, tissue.start, r.start, r.near_end, r.neighbours, self.viscous_coef,
+                self.tissue_inertia, dt, self.tissue_free)
+            self.speed2[tissue] = (s.v[tissue] ** 2).sum(1)
         for body in s.bodies:
             sl = slice(body.first, body.first + body.count)
             body.step(self.force[sl], s.gravity_m_s2, s.time_s, dt, st.mass_scaling)
@@ -309,6 +336,9 @@ class Solver:
     def _check(self) -> None:
         s = self.system
         i, why = _first_bad(s.x, s.v, s.n_moving, self.lo, self.hi, self.speed_limit)
+        if why == 2 and s.phase[i] == 0:
+            self._exclude_spray()
+            i, why = _first_bad(s.x, s.v, s.n_moving, self.lo, self.hi, self.speed_limit)
         if why == 0:
             return
         from hifumotion.particles._numba import PHASE_NAMES
@@ -334,6 +364,24 @@ class Solver:
             f"step {s.step} (t = {s.time_s:.6g} s): {len(bad)} particle(s) [{shown}], worst a "
             f"{PHASE_NAMES[int(s.phase[bad[0]])] if len(bad) else kind} particle, {reason}; "
             "try a smaller cfl, a larger support or softer coupling")
+
+    def _exclude_spray(self) -> None:
+        """Park the water particles that left the domain (as DualSPHysics excludes them).
+
+        A drop squeezed out from under the tissue can fly off; under mass scaling its
+        weight decelerates it √s-fold slower, so it may leave the tank. It is parked
+        where it left (clipped to the domain), at rest and held there, far from the
+        rest of the water; ``excluded_water`` counts them (reported by the run).
+        """
+        s = self.system
+        xf = s.x[: s.n_fluid]
+        out = np.flatnonzero(np.any((xf < self.lo) | (xf > self.hi), axis=1))
+        xf[out] = np.clip(xf[out], self.lo, self.hi)
+        s.v[out] = 0.0
+        self.held[out] = True
+        self.held_velocity[out] = 0.0
+        self.speed2[out] = 0.0
+        self.excluded_water += len(out)
 
     def run(self, duration_s: float, callback=None, every_s: float | None = None) -> None:
         """Advance by ``duration_s``; ``callback(solver)`` every ``every_s`` of simulated time."""

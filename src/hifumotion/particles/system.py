@@ -54,6 +54,13 @@ class CouplingParameters:
         pressure already couples it to the solids (see :mod:`.fluid`), and adding the
         penalty lifted a floating cube by 1.4 particle spacings in the buoyancy case;
         ``None`` sets the largest pair force to the tank-floor pressure on one particle face.
+    wall_coefficient
+        K_c (N·m⁴/kg²) of Eq. 18 between water and the tank's walls, with a kernel of
+        support ¾ of a spacing, so it is zero for water resting on the lattice and
+        acts only on water squeezed against a wall: pressure alone cannot stop a water
+        particle that a compressed tissue pushes into the floor (measured: pushed through
+        two wall layers at 1.4 s of the synthetic push). ``None``: its largest pair force is
+        ``contact_pressure_factor`` × E × Δx², like the solids' contact.
     contact_coefficient
         K_c (N·m⁴/kg²) of Eq. 18 between solids (tissue–bar, tissue–floor, bar–floor).
         ``None``: the largest pair force between a tissue particle and the heaviest solid
@@ -69,6 +76,7 @@ class CouplingParameters:
     """
 
     fluid_coefficient: float | None = 0.0
+    wall_coefficient: float | None = None
     contact_coefficient: float | None = None
     contact_pressure_factor: float = 4.0
     friction: float = 0.5
@@ -124,6 +132,7 @@ class ParticleSystem:
     step: int = 0
     fluid_stiffness_m2_s2: float = 0.0
     fluid_coefficient: float = 0.0
+    wall_coefficient: float = 0.0
     contact_coefficient: float = 0.0
     density: np.ndarray = field(default=None)
     pressure: np.ndarray = field(default=None)
@@ -258,6 +267,10 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
     kc_fluid = coupling.fluid_coefficient
     if kc_fluid is None:
         kc_fluid = rho0 * float(np.linalg.norm(g)) * max(water_depth_m, dx) * dx * dx / (m_f * m_t * dw_max)
+    kc_wall = coupling.wall_coefficient
+    if kc_wall is None:
+        dw_wall = float(np.abs(kernel_derivative(np.array([0.25 * h_c]), 0.75 * h_c))[0])
+        kc_wall = coupling.contact_pressure_factor * tissue.youngs_modulus_pa * dx * dx / (m_f * m_f * dw_wall)
     kc_contact = coupling.contact_coefficient
     if kc_contact is None:
         # calibrated on the heaviest pair the tissue meets (usually tissue–bar): Eq. 18 scales
@@ -278,7 +291,8 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
         counts=counts, support_m=h, spacing_m=dx, fluid=fluid, tissue=tissue, coupling=coupling,
         gravity_m_s2=g, domain_lo_m=lo, domain_hi_m=hi, tissue_rest=xt.copy(), rest=rest,
         tissue_held=held, tissue_held_velocity_m_s=held_v, bodies=rigid_bodies, fluid_stiffness_m2_s2=float(stiffness),
-        fluid_coefficient=float(kc_fluid), contact_coefficient=float(kc_contact),
+        fluid_coefficient=float(kc_fluid), wall_coefficient=float(kc_wall),
+        contact_coefficient=float(kc_contact),
         density=np.full(len(xf), rho0), pressure=np.zeros(len(xf)), strain=np.zeros(len(xt)),
         deform=np.tile(np.eye(3), (len(xt), 1, 1)),
     )

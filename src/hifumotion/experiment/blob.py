@@ -1,0 +1,114 @@
+"""A seeded irregular tissue sample: a lumpy ellipsoid with a flat underside.
+
+A cut piece of tissue (the paper's cow tissue) is roughly ellipsoidal, lumpy,
+and rests on a flat cut face. The body is star-shaped about its centre: a
+point ``p`` is inside when
+
+    |q| ≤ 1 + ε f(q/|q|),   q = (p − c) / a,
+
+``a`` the semi-axes (mm), ``ε`` the irregularity and ``f`` a smooth random
+field on the unit sphere — a sum of ``lobes`` plane waves ``cos(k n·d + φ)``
+with random directions ``n``, wavenumbers ``k`` ∈ [1.5, 3] and phases,
+scaled to ``max |f| = 1`` — and above the cut plane ``y ≥ y_cut``, so that
+the sample lies on its cut face instead of rocking on a point. Lengths in mm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Blob:
+    """The sample's shape (mm): semi-axes, lumps and the flat cut (see the module docstring).
+
+    Attributes
+    ----------
+    semi_axes_mm
+        Semi-axes ``a`` (x, y up, z) of the underlying ellipsoid (mm).
+    directions, wavenumbers, phases, amplitudes
+        The plane waves of ``f`` (unit vectors, rad per unit radius, rad, weights).
+    irregularity
+        ε: the relative height of the lumps.
+    cut_y
+        The cut plane's height in units of the y semi-axis (−1 … 1; −1: no cut).
+    """
+
+    semi_axes_mm: tuple[float, float, float]
+    directions: np.ndarray
+    wavenumbers: np.ndarray
+    phases: np.ndarray
+    amplitudes: np.ndarray
+    irregularity: float
+    cut_y: float
+
+    @classmethod
+    def random(cls, size_mm: tuple[float, float, float], irregularity: float, lobes: int,
+               bottom_cut: float, seed: int) -> "Blob":
+        """A blob whose bounding box is about ``size_mm`` (x, height, z) after the cut.
+
+        ``bottom_cut`` is the fraction of the ellipsoid's height cut off flat.
+        """
+        rng = np.random.default_rng(seed)
+        n = rng.standard_normal((max(lobes, 1), 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        k = rng.uniform(1.5, 3.0, len(n))
+        phi = rng.uniform(0.0, 2 * np.pi, len(n))
+        w = rng.uniform(0.5, 1.0, len(n))
+        # the height left after cutting a fraction of it must be size_mm[1]
+        sx, sy, sz = (float(v) for v in size_mm)
+        ay = sy / (2.0 * (1.0 - bottom_cut))
+        blob = cls((sx / 2, ay, sz / 2), n, k, phi, np.ones(len(n)), float(irregularity),
+                   -1.0 + 2.0 * bottom_cut)
+        # normalise the field so that its largest value on the sphere is 1
+        d = _fibonacci_sphere(4000)
+        peak = np.abs(blob._field(d, w)).max()
+        return cls(blob.semi_axes_mm, n, k, phi, w / max(peak, 1e-12), float(irregularity), blob.cut_y)
+
+    def _field(self, unit: np.ndarray, amplitudes: np.ndarray | None = None) -> np.ndarray:
+        a = self.amplitudes if amplitudes is None else amplitudes
+        return (a * np.cos(self.wavenumbers * (unit @ self.directions.T) + self.phases)).sum(-1)
+
+    def inside(self, points_mm: np.ndarray) -> np.ndarray:
+        """Whether points (mm, relative to the ellipsoid's centre) are inside the sample."""
+        q = np.asarray(points_mm, float) / np.asarray(self.semi_axes_mm)
+        r = np.linalg.norm(q, axis=-1)
+        unit = q / np.maximum(r, 1e-12)[..., None]
+        return (r <= 1.0 + self.irregularity * self._field(unit)) & (q[..., 1] >= self.cut_y)
+
+    def _lattice_inside(self, spacing_mm: float) -> np.ndarray:
+        a = np.asarray(self.semi_axes_mm) * (1.0 + self.irregularity)
+        axes = [np.arange(-ai, ai + spacing_mm, spacing_mm) for ai in a]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        return grid[self.inside(grid)]
+
+    def offset_mm(self, spacing_mm: float) -> np.ndarray:
+        """The shift :meth:`particles` applies to the blob's own frame (mm)."""
+        pts = self._lattice_inside(spacing_mm)
+        if len(pts) == 0:
+            return np.zeros(3)
+        lo, hi = pts.min(0), pts.max(0)
+        return np.array([-(lo[0] + hi[0]) / 2, spacing_mm / 2 - lo[1], -(lo[2] + hi[2]) / 2])
+
+    def particles(self, spacing_mm: float) -> np.ndarray:
+        """Lattice points (mm) inside, shifted by :meth:`offset_mm` so the cut face rests at
+        y = 0 (particle centres half a spacing above) and x = z = 0 is the middle."""
+        pts = self._lattice_inside(spacing_mm)
+        return pts + self.offset_mm(spacing_mm) if len(pts) else pts
+
+    def volume_mm3(self, samples: int = 400_000, seed: int = 0) -> float:
+        """Volume (mm³) by Monte Carlo over the bounding box (±0.3 % at the default samples)."""
+        rng = np.random.default_rng(seed)
+        a = np.asarray(self.semi_axes_mm) * (1.0 + self.irregularity)
+        p = rng.uniform(-a, a, (samples, 3))
+        return float(self.inside(p).mean() * np.prod(2 * a))
+
+
+def _fibonacci_sphere(n: int) -> np.ndarray:
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    r = np.sqrt(1 - z * z)
+    phi = np.pi * (1 + 5 ** 0.5) * k
+    return np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1)

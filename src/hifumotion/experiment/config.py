@@ -1,0 +1,126 @@
+"""Settings of the synthetic experiment (``twin.toml``), with the presets ``default`` and ``small``.
+
+Every quantity carries its unit in its name or description; ``hifumotion
+experiment --print-config`` prints them all. A ``twin.toml`` overrides any of
+them on top of the chosen preset, e.g.::
+
+    seed = 3
+
+    [tissue]
+    youngs_modulus_pa = 9000.0
+
+    [bar]
+    force_n = 0.2
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field
+
+from hifumotion.config import ConfigModel, read_config_file, validate_config
+from hifumotion.errors import InputError
+from hifumotion.particles.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
+
+
+class BlobConfig(ConfigModel):
+    size_mm: tuple[float, float, float] = Field((30.0, 18.0, 24.0), description="approximate extent of the tissue sample (x, height y, z) in mm")
+    irregularity: float = Field(0.12, ge=0, le=0.4, description="relative height of the sample's lumps (0: an ellipsoid)")
+    lobes: int = Field(6, ge=1, le=30, description="number of random waves making the lumps")
+    bottom_cut: float = Field(0.2, ge=0, lt=0.5, description="fraction of the ellipsoid's height cut off flat: the face the sample rests on")
+
+
+class ResolutionConfig(ConfigModel):
+    model_tissue_particles: int = Field(4399, ge=100, description="tissue particles of the model that will be fitted (the paper: 4,399)")
+    truth_particle_factor: float = Field(2.0, ge=1.0, description="the truth has this many times the fitted model's particles (≥ 2 for an honest test)")
+    support_factor: float = Field(2.0, ge=1.5, le=3.0, description="kernel support radius h in particle spacings")
+
+
+class ImagingConfig(ConfigModel):
+    frames: int = Field(200, ge=2, description="number of B-mode frames of the imaging plane while the bar pushes")
+    frame_rate_hz: float = Field(20.0, gt=0, description="imaging frame rate in Hz (frame interval = 1/rate s)")
+    pixel_mm: float = Field(0.2, gt=0, description="pixel size of every image in mm (square pixels)")
+    width_mm: float = Field(44.0, gt=0, description="lateral extent of the images in mm")
+    depth_mm: float = Field(40.0, gt=0, description="depth extent of the images in mm, from the probe's face")
+    probe_standoff_mm: float = Field(8.0, ge=0, description="water path from the probe face (below the tank's membrane floor, looking up) to the floor in mm")
+    sweep_gap_mm: float = Field(1.0, gt=0, description="distance between the parallel planes of the spatial sweep in mm")
+    sweep_margin_mm: float = Field(2.0, ge=0, description="the sweep starts and ends this far beyond the tissue in mm")
+    center_frequency_mhz: float = Field(3.5, gt=0, description="centre frequency of the imaging probe in MHz")
+    axial_fwhm_mm: float = Field(0.45, gt=0, description="axial resolution (FWHM of the pulse-echo envelope) in mm")
+    lateral_fwhm_mm: float = Field(1.1, gt=0, description="lateral resolution at the focus (FWHM) in mm")
+    dynamic_range_db: float = Field(50.0, gt=0, description="log-compression dynamic range in dB")
+    tissue_echogenicity: float = Field(1.0, gt=0, description="backscatter power of the tissue (relative)")
+    echo_texture: float = Field(0.35, ge=0, lt=1, description="relative variation of the tissue's backscatter (smooth, 1.5 mm scale)")
+    water_echogenicity: float = Field(0.02, ge=0, description="backscatter power of the water (relative)")
+    floor_echogenicity: float = Field(5.0, ge=0, description="backscatter power of the tank's membrane floor (relative)")
+    bar_echogenicity: float = Field(30.0, ge=0, description="backscatter power of the metal bar (relative)")
+
+
+class ClinicianConfig(ConfigModel):
+    points: int = Field(16, ge=4, description="points a clinician clicks around the tissue on the first frame")
+    error_mm: float = Field(0.6, ge=0, description="standard deviation of each click's distance from the true boundary in mm")
+
+
+class TwinRunConfig(ConfigModel):
+    mass_scaling: float = Field(3000.0, ge=1.0, description="inertia multiplier of the quasi-static push (weights unchanged; see docs/decisions.md for the tolerance)")
+    settle_s: float = Field(0.3, ge=0, description="damped settling under gravity before t = 0 in s")
+    settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling in 1/s")
+    cfl: float = Field(0.4, gt=0, le=1.0, description="safety factor on the time step")
+    max_step_s: float = Field(5e-3, gt=0, description="largest time step in s")
+    particle_frames_every: int = Field(5, ge=1, description="write every n-th frame's particles as VTU (all frames go to tissue_trajectory.npz)")
+
+
+class TwinConfig(ConfigModel):
+    """The synthetic experiment: sample, material, bar, tank, resolution, imaging."""
+
+    seed: int = Field(0, description="seed of every random draw (shape, speckle, clicks)")
+    blob: BlobConfig = BlobConfig()
+    tissue: TissueMaterial = TissueMaterial(beta1=7e5, rate_floor_per_s=0.02)
+    bar: BarConfig = BarConfig(ramp_s=0.5, density_kg_m3=2700.0)
+    tank: TankConfig = TankConfig(size_mm=(44.0, 40.0, 36.0), water_depth_mm=6.0)
+    physics: PhysicsConfig = PhysicsConfig()
+    resolution: ResolutionConfig = ResolutionConfig()
+    imaging: ImagingConfig = ImagingConfig()
+    clinician: ClinicianConfig = ClinicianConfig()
+    run: TwinRunConfig = TwinRunConfig()
+
+
+#: Overrides of each preset on top of the defaults.
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    # a reduced twin for tests: a coarse model, 40 frames over 4 s, coarse images
+    "small": {
+        "resolution": {"model_tissue_particles": 500},
+        "imaging": {"frames": 40, "pixel_mm": 0.4, "sweep_gap_mm": 2.0},
+        "run": {"particle_frames_every": 10},
+    },
+}
+
+Preset = Literal["default", "small"]
+
+
+def _merge(base: dict, extra: dict) -> dict:
+    out = copy.deepcopy(base)
+    for k, v in extra.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def twin_config(preset: str = "default", overrides: dict[str, Any] | None = None,
+                config_file: str | Path | None = None, seed: int | None = None) -> TwinConfig:
+    """The settings: ``preset`` ← ``config_file`` ← ``overrides`` ← ``seed`` (later wins)."""
+    if preset not in PRESETS:
+        raise InputError(f"unknown preset; choose from {', '.join(PRESETS)}", preset)
+    data = _merge(TwinConfig().model_dump(mode="json"), PRESETS[preset])
+    source: str | Path = f"preset {preset}"
+    if config_file is not None:
+        data = _merge(data, read_config_file(config_file))
+        source = config_file
+    if overrides:
+        data = _merge(data, overrides)
+    if seed is not None:
+        data["seed"] = int(seed)
+    return validate_config(TwinConfig, data, source)

@@ -1,0 +1,316 @@
+"""Generate the synthetic experiment: one documented order from settings to files.
+
+1. **Sample.** A seeded irregular blob (:mod:`.blob`); its volume fixes the fitted
+   model's particle spacing (``resolution.model_tissue_particles``, the paper's
+   4,399) and the truth's, ``truth_particle_factor`` times as many particles.
+2. **Physics.** The particle framework (:mod:`hifumotion.particles`) simulates the
+   sample in its pool, pushed by the bar (force ramp, then held), at the truth's
+   resolution; it settles under gravity first, then runs ``frames / frame_rate``
+   seconds, recording the tissue at every frame time.
+3. **Truth.** Cross-sections of the particles (:func:`~hifumotion.particles.section.section`)
+   in the imaging plane at every frame, and in every sweep plane at rest.
+4. **Observation.** B-mode images of the same planes (:mod:`.imaging`) with the
+   speckle carried by the tissue; a clinician's rough click-contour on frame 0.
+5. **Files.** ``observed/`` holds only what a device's user has; ``truth/`` what only
+   the scoring may read (see :func:`generate_twin`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from hifumotion.contour import Contour
+from hifumotion.experiment.blob import Blob
+from hifumotion.experiment.config import TwinConfig
+from hifumotion.experiment import imaging as im
+from hifumotion.io import write_json
+from hifumotion.io.files import write_text
+from hifumotion.io.writers import write_contours_csv, write_masks_nifti, write_nifti, write_png_stack
+from hifumotion.particles.scene import ParticleConfig, RunConfig, Scene, TissueConfig
+from hifumotion.particles.section import section
+from hifumotion.particles.simulate import SimulationResult, simulate
+
+Progress = Callable[[str, float], None]
+
+
+@dataclass
+class TwinResult:
+    """What :func:`generate_twin` made (arrays in memory; files under ``folder``)."""
+
+    config: TwinConfig
+    times_s: np.ndarray
+    frames: np.ndarray            # uint8 (T, H, W) observed B-mode frames
+    frame_masks: np.ndarray       # bool (T, H, W) true masks
+    sweep: np.ndarray             # uint8 (S, H, W)
+    sweep_masks: np.ndarray       # bool (S, H, W)
+    probe: im.Probe
+    simulation: SimulationResult
+    facts: dict = field(default_factory=dict)
+    timings_s: dict = field(default_factory=dict)
+
+
+def resolution(cfg: TwinConfig, blob: Blob) -> dict:
+    """Spacings (mm) of the fitted model and of the truth, from the sample's volume."""
+    volume = blob.volume_mm3(seed=cfg.seed)
+    model = (volume / cfg.resolution.model_tissue_particles) ** (1 / 3)
+    truth = model / cfg.resolution.truth_particle_factor ** (1 / 3)
+    return {"blob_volume_mm3": volume, "model_spacing_mm": model, "truth_spacing_mm": truth}
+
+
+def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float) -> Scene:
+    """The particle scene of the truth (re-runnable: ``hifumotion simulate truth/scene.toml``)."""
+    im_cfg = cfg.imaging
+    tissue = TissueConfig(**cfg.tissue.model_dump(), shape="particles", particles_csv=particles_csv)
+    return Scene(
+        tank=cfg.tank, tissue=tissue, bar=cfg.bar, physics=cfg.physics,
+        particles=ParticleConfig(spacing_mm=spacing_mm, support_factor=cfg.resolution.support_factor),
+        run=RunConfig(duration_s=(im_cfg.frames - 1) / im_cfg.frame_rate_hz, output_interval_s=1.0 / im_cfg.frame_rate_hz,
+                      settle_s=cfg.run.settle_s, settle_damping_per_s=cfg.run.settle_damping_per_s,
+                      mass_scaling=cfg.run.mass_scaling, cfl=cfg.run.cfl, max_step_s=cfg.run.max_step_s,
+                      write_vtu=True, vtu_every=cfg.run.particle_frames_every))
+
+
+def clinician_contour(contour_mm: np.ndarray, cfg_points: int, error_mm: float,
+                      rng: np.random.Generator) -> np.ndarray:
+    """A rough contour as clicked: ``cfg_points`` points spread along the true boundary
+    (in-plane mm), each off by a random radial error, as an (N, 2) polygon in mm."""
+    c = np.asarray(contour_mm, float)
+    seg = np.linalg.norm(np.diff(np.vstack([c, c[:1]]), axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    start = rng.uniform(0, s[-1])
+    at = (start + np.arange(cfg_points) * s[-1] / cfg_points) % s[-1]
+    closed = np.vstack([c, c[:1]])
+    pts = np.column_stack([np.interp(at, s, closed[:, 0]), np.interp(at, s, closed[:, 1])])
+    centre = c.mean(0)
+    radial = pts - centre
+    radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-9)
+    return pts + radial * rng.normal(0.0, error_mm, (cfg_points, 1))
+
+
+def motion_summary(masks: np.ndarray, pixel_mm: float, times_s: np.ndarray, tissue_mm: np.ndarray,
+                   spacing_mm: float, tank_mm) -> dict:
+    """Centroid path and area of the true sections, and the physical sanity checks."""
+    rows, cols = np.indices(masks.shape[1:])
+    area = masks.sum((1, 2)).astype(float)
+    safe = np.maximum(area, 1)
+    cx = (masks * cols).sum((1, 2)) / safe * pixel_mm
+    cy = (masks * rows).sum((1, 2)) / safe * pixel_mm
+    path = np.column_stack([cx, cy])
+    step = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    lo = tissue_mm.min(axis=(0, 1))
+    hi = tissue_mm.max(axis=(0, 1))
+    spread = np.linalg.norm(tissue_mm - tissue_mm.mean(1, keepdims=True), axis=2).max(1)
+    return {
+        "frames": len(times_s),
+        "centroid_mm": path.round(4).tolist(),
+        "area_mm2": (area * pixel_mm ** 2).round(3).tolist(),
+        "centroid_displacement_mm": float(np.linalg.norm(path[-1] - path[0])),
+        "centroid_path_length_mm": float(step.sum()),
+        "largest_centroid_shift_mm": float(np.linalg.norm(path - path[0], axis=1).max()),
+        "area_change_mm2": float((area[-1] - area[0]) * pixel_mm ** 2),
+        "area_change_fraction": float((area[-1] - area[0]) / max(area[0], 1)),
+        "checks": {
+            "lowest_particle_y_mm": float(lo[1]),
+            "sinks_through_floor": bool(lo[1] < -0.5 * spacing_mm),
+            "leaves_tank": bool(np.any(lo < -0.5 * spacing_mm) or np.any(hi > np.asarray(tank_mm) + 0.5 * spacing_mm)),
+            "largest_radius_growth": float(spread.max() / max(spread[0], 1e-9) - 1.0),
+            "explodes": bool(spread.max() > 1.5 * spread[0]),
+            "section_empty_frames": int((area == 0).sum()),
+        },
+    }
+
+
+def _write_csv(path: Path, header: list[str], rows) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    write_text(path, buf.getvalue())
+
+
+def _contours(masks_sections, pixel_mm, labels) -> dict:
+    out = {}
+    for label, sec in zip(labels, masks_sections):
+        if len(sec.contour_px) >= 3:
+            out[label] = Contour(sec.contour_px, (pixel_mm, pixel_mm))
+    return out
+
+
+def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None = None) -> TwinResult:
+    """Run the experiment (module docstring) and write ``folder/observed`` and ``folder/truth``.
+
+    ``observed/``: ``sweep/slice_000.png …`` + ``sweep.nii.gz`` + ``sweep_positions.csv``,
+    ``frames/frame_0000.png …`` + ``frames.nii.gz``, ``initial_contour.csv`` and
+    ``setup.json`` (image geometry, frame interval, tank, bar — what the operator knows).
+    ``truth/``: ``parameters.json``, ``frames/frame_0000.png …`` and ``sweep/slice_000.png …``
+    (0/255 masks on the same grids), ``frame_contours.csv``, ``sweep_contours.csv``,
+    ``particles/`` (VTU + PVD for ParaView), ``tissue_trajectory.npz``, ``bar_pose.csv``,
+    ``motion.json``, ``scene.toml`` + ``blob_particles.csv`` (re-runnable).
+    """
+    folder = Path(folder)
+    obs, tru = folder / "observed", folder / "truth"
+    for d in (obs / "sweep", obs / "frames", tru / "sweep", tru / "frames", tru / "particles"):
+        d.mkdir(parents=True, exist_ok=True)
+    tell = progress or (lambda stage, fraction: None)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(cfg.seed)
+    seeds = rng.integers(0, 2**31 - 1, 8)          # one stream per use, all from cfg.seed
+
+    # 1. the sample and the resolutions
+    blob = Blob.random(cfg.blob.size_mm, cfg.blob.irregularity, cfg.blob.lobes, cfg.blob.bottom_cut,
+                       int(seeds[0]))
+    res = resolution(cfg, blob)
+    dx = res["truth_spacing_mm"]
+    pts = blob.particles(dx)
+    particles_csv = tru / "blob_particles.csv"
+    _write_csv(particles_csv, ["x_mm", "y_mm", "z_mm", "volume_mm3"],
+               ([f"{p[0]:.6f}", f"{p[1]:.6f}", f"{p[2]:.6f}", f"{dx ** 3:.6f}"] for p in pts))
+    scene = truth_scene(cfg, particles_csv, dx)
+    from hifumotion.config import dump_toml
+    scene_for_file = scene.model_copy(deep=True)
+    scene_for_file.tissue.particles_csv = Path("blob_particles.csv")
+    write_text(tru / "scene.toml", dump_toml(scene_for_file))
+    timings["sample_s"] = time.perf_counter() - t0
+
+    # 2. physics
+    t1 = time.perf_counter()
+    sim = simulate(scene, tru / "particles", progress=lambda f: tell("simulate", f))
+    timings["simulate_s"] = time.perf_counter() - t1
+    times = sim.times_s
+    rest = sim.tissue_mm[0]
+    vol = sim.tissue_volume_mm3
+
+    # 3. truth sections
+    t2 = time.perf_counter()
+    probe = im.make_probe(cfg.imaging, rest)
+    frame_plane = probe.plane(probe.z_frames_mm)
+    frame_secs = []
+    for k in range(len(times)):
+        frame_secs.append(section(sim.tissue_mm[k], vol, dx, frame_plane))
+        tell("sections", (k + 1) / (len(times) + len(probe.sweep_z_mm)))
+    sweep_secs = []
+    for k, z in enumerate(probe.sweep_z_mm):
+        sweep_secs.append(section(rest, vol, dx, probe.plane(z)))
+        tell("sections", (len(times) + k + 1) / (len(times) + len(probe.sweep_z_mm)))
+    frame_masks = np.stack([s.mask for s in frame_secs])
+    sweep_masks = np.stack([s.mask for s in sweep_secs])
+    timings["sections_s"] = time.perf_counter() - t2
+
+    # 4. observation
+    t3 = time.perf_counter()
+    facts = sim.facts
+    axis = np.asarray(facts["bar_axis"]) if cfg.bar.enabled else np.array([0.0, -1.0, 0.0])
+    tip0 = np.asarray(facts["bar_tip_mm"]) if cfg.bar.enabled else np.full(3, 1e9)
+    bar_shift = sim.bar_centre_mm - sim.bar_centre_mm[0] if cfg.bar.enabled else np.zeros((len(times), 3))
+    size = np.asarray(cfg.tank.size_mm)
+    texture = im.Texture(-np.full(3, 2.0), size + 2.0, cfg.imaging.echo_texture, np.random.default_rng(seeds[1]))
+    trans = im.transducer(cfg.imaging, probe, rest)
+    extent = (probe.shape[0] * probe.pixel_mm, probe.shape[1] * probe.pixel_mm)
+    sweep_images = []
+    for k, z in enumerate(probe.sweep_z_mm):
+        echo = im.EchoMap(cfg.imaging, probe, z, sweep_masks[k],
+                          im.bar_mask(probe, z, tip0, axis, cfg.bar.radius_mm, cfg.bar.length_mm) if cfg.bar.enabled
+                          else np.zeros(probe.shape, bool), cfg.tank.water_depth_mm, texture)
+        scat = im.Scatterers.uniform(extent, trans, int(seeds[2]) + k)
+        sweep_images.append(im.render(echo, scat, None, probe, trans, int(seeds[3]), sweep_masks[k]).image)
+        tell("images", (k + 1) / (len(probe.sweep_z_mm) + len(times)))
+    z0 = probe.z_frames_mm
+    echo0 = im.EchoMap(cfg.imaging, probe, z0, frame_masks[0],
+                       im.bar_mask(probe, z0, tip0, axis, cfg.bar.radius_mm, cfg.bar.length_mm) if cfg.bar.enabled
+                       else np.zeros(probe.shape, bool), cfg.tank.water_depth_mm, texture)
+    speckle = im.MovingSpeckle(echo0, im.Scatterers.uniform(extent, trans, int(seeds[4])), rest, dx)
+    frames = []
+    for k in range(len(times)):
+        pos = speckle.positions(sim.tissue_mm[k], bar_shift[k])
+        frames.append(im.render(echo0, speckle.scatterers, pos, probe, trans, int(seeds[5]), frame_masks[k]).image)
+        tell("images", (len(probe.sweep_z_mm) + k + 1) / (len(probe.sweep_z_mm) + len(times)))
+    frames = np.stack(frames)
+    sweep = np.stack(sweep_images)
+    clicked = clinician_contour(frame_secs[0].contour_mm, cfg.clinician.points, cfg.clinician.error_mm,
+                                np.random.default_rng(seeds[6]))
+    timings["images_s"] = time.perf_counter() - t3
+
+    # 5. files
+    t4 = time.perf_counter()
+    px = probe.pixel_mm
+    interval = 1.0 / cfg.imaging.frame_rate_hz
+    write_png_stack(obs / "frames", frames, prefix="frame_", digits=4)
+    write_nifti(obs / "frames.nii.gz", frames, (px, px), frame_interval_s=interval)
+    write_png_stack(obs / "sweep", sweep, prefix="slice_", digits=3)
+    write_nifti(obs / "sweep.nii.gz", sweep, (px, px), slice_positions_mm=probe.sweep_z_mm)
+    _write_csv(obs / "sweep_positions.csv", ["slice", "z_mm"],
+               ([k, f"{z:.4f}"] for k, z in enumerate(probe.sweep_z_mm)))
+    write_contours_csv(obs / "initial_contour.csv", {0: Contour.from_mm(clicked, px)})
+    write_json(obs / "setup.json", {
+        "description": "What the operator of the HIFU device knows: image geometry and timing, the pool, "
+                       "the bar's shape and where it starts. Tank frame in mm, y up; image rows run "
+                       "upwards from the probe (depth), columns along x.",
+        "frame_interval_s": interval, "frames": int(len(times)), "frame_files": "frames/frame_%04d.png",
+        "sweep_files": "sweep/slice_%03d.png", "initial_contour_frame": 0,
+        "imaging": probe.as_dict(),
+        "tank": {"size_mm": list(cfg.tank.size_mm), "water_depth_mm": cfg.tank.water_depth_mm},
+        "bar": {"enabled": cfg.bar.enabled, "radius_mm": cfg.bar.radius_mm, "length_mm": cfg.bar.length_mm,
+                "direction": axis.tolist(), "tip_at_rest_mm": tip0.tolist(),
+                "weight_supported": cfg.bar.weight_supported, "force_ramp_s": cfg.bar.ramp_s},
+    })
+    write_png_stack(tru / "frames", frame_masks, prefix="frame_", digits=4)
+    write_png_stack(tru / "sweep", sweep_masks, prefix="slice_", digits=3)
+    write_masks_nifti(tru / "frames.nii.gz", frame_masks, (px, px), frame_interval_s=interval)
+    write_masks_nifti(tru / "sweep.nii.gz", sweep_masks, (px, px), slice_positions_mm=probe.sweep_z_mm)
+    write_contours_csv(tru / "frame_contours.csv", _contours(frame_secs, px, range(len(times))))
+    write_contours_csv(tru / "sweep_contours.csv", _contours(sweep_secs, px, range(len(probe.sweep_z_mm))))
+    np.savez_compressed(tru / "tissue_trajectory.npz", times_s=times, positions_mm=sim.tissue_mm.astype(np.float32),
+                        volumes_mm3=vol, spacing_mm=dx)
+    schedule = scene.bar.schedule()
+    _write_csv(tru / "bar_pose.csv", ["frame", "time_s", "centre_x_mm", "centre_y_mm", "centre_z_mm", "force_n"],
+               ([k, f"{t:.6g}", *(f"{c:.6f}" for c in sim.bar_centre_mm[k]), f"{schedule(t):.6g}"]
+                for k, t in enumerate(times)))
+    system = sim.system
+    motion = motion_summary(frame_masks, px, times, sim.tissue_mm, dx, cfg.tank.size_mm)
+    write_json(tru / "motion.json", motion)
+    facts = {**facts, **res, "truth_tissue_particles": int(len(pts)),
+             "model_tissue_particles": cfg.resolution.model_tissue_particles}
+    write_json(tru / "parameters.json", {
+        "description": "The true parameters of the synthetic experiment (SI unless the name says otherwise).",
+        "external_force_n": cfg.bar.force_n, "force_ramp_s": cfg.bar.ramp_s,
+        "force_direction": axis.tolist(),
+        "youngs_modulus_pa": cfg.tissue.youngs_modulus_pa, "poisson_ratio": cfg.tissue.poisson_ratio,
+        "beta1_pa_s_pow": cfg.tissue.beta1, "beta2": cfg.tissue.beta2,
+        "tissue_density_kg_m3": cfg.tissue.density_kg_m3,
+        "water_density_kg_m3": cfg.physics.water_density_kg_m3,
+        "water_viscosity_pa_s": cfg.physics.water_viscosity_pa_s,
+        "water_stiffness_m2_s2": system.fluid_stiffness_m2_s2,
+        "contact_coefficient_n_m4_kg2": system.contact_coefficient,
+        "wall_coefficient_n_m4_kg2": system.wall_coefficient,
+        "friction": cfg.physics.friction,
+        "gravity_m_s2": cfg.physics.gravity_m_s2,
+        "mass_scaling": cfg.run.mass_scaling,
+        "seed": cfg.seed,
+        "facts": facts,
+        "config": json.loads(cfg.model_dump_json()),
+    })
+    timings["write_s"] = time.perf_counter() - t4
+    timings["total_s"] = time.perf_counter() - t0
+    facts["steps"] = sim.steps
+    return TwinResult(cfg, times, frames, frame_masks, sweep, sweep_masks, probe, sim, facts, timings)
+
+
+def summary_line(result: TwinResult) -> str:
+    m = motion_summary(result.frame_masks, result.probe.pixel_mm, result.times_s, result.simulation.tissue_mm,
+                       result.facts["truth_spacing_mm"], result.config.tank.size_mm)
+    return (f"{len(result.times_s)} frames over {result.times_s[-1]:.1f} s; centroid moved "
+            f"{m['centroid_displacement_mm']:.2f} mm, area changed {m['area_change_mm2']:+.1f} mm² "
+            f"({100 * m['area_change_fraction']:+.1f} %)")
+
+
+__all__ = ["TwinResult", "generate_twin", "resolution", "truth_scene", "clinician_contour", "motion_summary",
+           "summary_line"]

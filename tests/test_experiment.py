@@ -1,0 +1,157 @@
+"""The synthetic experiment (small preset): files, determinism, physics and imaging sanity."""
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from hifumotion.errors import InputError
+from hifumotion.experiment import Blob, generate_twin, twin_config
+from hifumotion.io.writers import read_contours_csv
+from hifumotion.metrics import dice
+
+
+@pytest.fixture(scope="module")
+def twin(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("twin")
+    result = generate_twin(twin_config("small", seed=1), folder)
+    return folder, result
+
+
+def _digest(folder: Path, pattern: str) -> str:
+    h = hashlib.sha256()
+    for p in sorted(folder.glob(pattern)):
+        h.update(p.name.encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def test_blob_is_seeded_and_has_its_size():
+    a = Blob.random((30, 18, 24), 0.12, 6, 0.2, seed=1)
+    b = Blob.random((30, 18, 24), 0.12, 6, 0.2, seed=1)
+    c = Blob.random((30, 18, 24), 0.12, 6, 0.2, seed=2)
+    pts = a.particles(1.0)
+    assert np.array_equal(pts, b.particles(1.0))
+    assert not np.array_equal(pts, c.particles(1.0)[: len(pts)])
+    extent = pts.max(0) - pts.min(0) + 1.0
+    assert np.allclose(extent, (30, 18, 24), rtol=0.25)
+    assert pts[:, 1].min() == pytest.approx(0.5)          # resting on its cut face
+    assert len(pts) * 1.0 == pytest.approx(a.volume_mm3(), rel=0.03)
+    # with no lumps and no cut it is the ellipsoid: π/6 abc
+    e = Blob.random((30, 18, 24), 0.0, 6, 0.0, seed=0)
+    assert e.volume_mm3() == pytest.approx(np.pi / 6 * 30 * 18 * 24, rel=0.01)
+
+
+def test_observed_and_truth_folders(twin):
+    folder, result = twin
+    obs, tru = folder / "observed", folder / "truth"
+    frames = sorted((obs / "frames").glob("frame_*.png"))
+    masks = sorted((tru / "frames").glob("frame_*.png"))
+    assert len(frames) == len(masks) == 40
+    assert len(sorted((obs / "sweep").glob("slice_*.png"))) == len(sorted((tru / "sweep").glob("slice_*.png")))
+    img, mask = iio.imread(frames[5]), iio.imread(masks[5])
+    assert img.shape == mask.shape and set(np.unique(mask)) <= {0, 255}
+    setup = json.loads((obs / "setup.json").read_text())
+    assert setup["frame_interval_s"] == pytest.approx(0.1)
+    # nothing of the truth in observed/
+    names = {p.name for p in obs.rglob("*")}
+    assert not any(k in n for n in names for k in ("truth", "parameters", "particles", "motion"))
+    params = json.loads((tru / "parameters.json").read_text())
+    assert params["youngs_modulus_pa"] == 13e3 and params["external_force_n"] == 0.25
+    assert (tru / "particles" / "frames.pvd").is_file()
+    assert result.facts["truth_tissue_particles"] >= 2 * 500 * 0.9
+
+
+def test_truth_section_is_the_blob_at_rest(twin):
+    # frame 0's true mask against the blob's own shape in that plane (placed as the scene
+    # places it), independent of the particles: only settling separates them
+    folder, result = twin
+    cfg = result.config
+    blob = Blob.random(cfg.blob.size_mm, cfg.blob.irregularity, cfg.blob.lobes, cfg.blob.bottom_cut,
+                       int(np.random.default_rng(cfg.seed).integers(0, 2**31 - 1, 8)[0]))
+    dx = result.facts["truth_spacing_mm"]
+    tank = np.asarray(cfg.tank.size_mm)
+    placed = np.array([tank[0] / 2, 0.0, tank[2] / 2]) + blob.offset_mm(dx)   # as the scene places it
+    pts = result.probe.plane(result.probe.z_frames_mm).points_mm().reshape(-1, 3)
+    shape = blob.inside(pts - placed).reshape(result.probe.shape)
+    assert dice(shape, result.frame_masks[0]) > 0.93
+
+
+def test_motion_is_visible_and_physical(twin):
+    folder, _ = twin
+    motion = json.loads((folder / "truth" / "motion.json").read_text())
+    assert motion["centroid_displacement_mm"] > 0.3      # the bar pushes it visibly
+    assert motion["area_change_mm2"] != 0
+    checks = motion["checks"]
+    assert not checks["sinks_through_floor"] and not checks["leaves_tank"] and not checks["explodes"]
+    assert checks["section_empty_frames"] == 0
+
+
+def test_clicked_contour_is_rough_but_near(twin):
+    folder, result = twin
+    clicked = list(read_contours_csv(folder / "observed" / "initial_contour.csv").values())[0]
+    truth = result.frame_masks[0]
+    from scipy import ndimage
+
+    edge = truth ^ ndimage.binary_erosion(truth)
+    dist_px = ndimage.distance_transform_edt(~edge)
+    pts = np.rint(clicked.points_px).astype(int)
+    err_mm = dist_px[pts[:, 1], pts[:, 0]] * result.probe.pixel_mm
+    assert len(pts) == result.config.clinician.points
+    assert 0.1 < err_mm.mean() < 1.5                       # σ = 0.6 mm: mean |error| ≈ 0.48
+
+
+def test_images_show_the_tissue(twin):
+    folder, result = twin
+    img = result.frames[10].astype(float)
+    mask = result.frame_masks[10]
+    from scipy import ndimage
+
+    ring = ndimage.binary_dilation(mask, iterations=8) & ~ndimage.binary_dilation(mask, iterations=3)
+    assert img[mask].mean() > img[ring].mean() + 20      # tissue brighter than water/air around it
+
+
+def test_same_seed_same_files_other_seed_other_files(twin, tmp_path):
+    folder, _ = twin
+    again = tmp_path / "again"
+    generate_twin(twin_config("small", seed=1), again)
+    for pattern in ("observed/frames/*.png", "observed/sweep/*.png", "truth/frames/*.png", "observed/*.csv"):
+        assert _digest(folder, pattern) == _digest(again, pattern), pattern
+    other = tmp_path / "other"
+    generate_twin(twin_config("small", seed=2), other)
+    assert _digest(folder, "truth/sweep/*.png") != _digest(other, "truth/sweep/*.png")
+    a = iio.imread(folder / "observed/frames/frame_0000.png")
+    b = iio.imread(other / "observed/frames/frame_0000.png")
+    assert np.corrcoef(a.ravel(), b.ravel())[0, 1] < 0.9
+
+
+def test_config_overrides_and_errors(tmp_path):
+    toml = tmp_path / "twin.toml"
+    toml.write_text("seed = 5\n[tissue]\nyoungs_modulus_pa = 9000.0\n[bar]\nforce_n = 0.2\n")
+    cfg = twin_config("small", config_file=toml)
+    assert cfg.seed == 5 and cfg.tissue.youngs_modulus_pa == 9000.0 and cfg.bar.force_n == 0.2
+    assert cfg.resolution.model_tissue_particles == 500           # the preset still applies
+    assert twin_config("small", config_file=toml, seed=7).seed == 7
+    toml.write_text("[tissue]\npoisson_ratio = 0.7\n")
+    with pytest.raises(InputError, match="tissue.poisson_ratio"):
+        twin_config(config_file=toml)
+    with pytest.raises(InputError, match="preset"):
+        twin_config("huge")
+
+
+def test_cli_print_config_and_existing_folder(tmp_path):
+    run = [sys.executable, "-m", "hifumotion"]
+    out = subprocess.run(run + ["experiment", "--print-config"], capture_output=True, text=True)
+    assert out.returncode == 0
+    assert "youngs_modulus_pa = 13000.0" in out.stdout and "in Pa" in out.stdout
+    (tmp_path / "exists").mkdir()
+    (tmp_path / "exists" / "keep.txt").write_text("mine")
+    out = subprocess.run(run + ["experiment", "--preset", "small", "-o", str(tmp_path / "exists")],
+                         capture_output=True, text=True)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert (tmp_path / "exists" / "keep.txt").read_text() == "mine"
