@@ -57,7 +57,7 @@ def test_observed_and_truth_folders(twin):
     img, mask = iio.imread(frames[5]), iio.imread(masks[5])
     assert img.shape == mask.shape and set(np.unique(mask)) <= {0, 255}
     setup = json.loads((obs / "setup.json").read_text())
-    assert setup["frame_interval_s"] == pytest.approx(0.1)
+    assert setup["frame_interval_s"] == pytest.approx(1 / result.config.imaging.frame_rate_hz)
     # nothing of the truth in observed/
     names = {p.name for p in obs.rglob("*")}
     assert not any(k in n for n in names for k in ("truth", "parameters", "particles", "motion"))
@@ -155,3 +155,41 @@ def test_cli_print_config_and_existing_folder(tmp_path):
                          capture_output=True, text=True)
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert (tmp_path / "exists" / "keep.txt").read_text() == "mine"
+
+
+def test_settling_is_critically_damped_for_the_slowest_mode():
+    from hifumotion.experiment.twin import settling
+
+    cfg = twin_config("small")
+    duration, damping = settling(cfg, height_mm=18.0)
+    omega = 0.5 * np.pi * np.sqrt(13e3 / 1050.0) / 0.018 / np.sqrt(cfg.run.mass_scaling)
+    assert damping == pytest.approx(2 * omega) and duration == pytest.approx(6 / omega)
+    cfg.run.settle_s, cfg.run.settle_damping_per_s = 0.5, 10.0
+    assert settling(cfg, 18.0) == (0.5, 10.0)
+
+
+def test_mass_scaling_keeps_the_frames(twin, tmp_path):
+    # the speed-up's tolerance: the same truth with a quarter of the inertia multiplier
+    from hifumotion.experiment.twin import simulate_truth, truth_sections
+
+    _, result = twin
+    cfg = result.config.model_copy(deep=True)
+    cfg.run.mass_scaling /= 4
+    cfg.run.particle_frames_every = 1000
+    other = simulate_truth(cfg, tmp_path)
+    masks = np.stack([s.mask for s in truth_sections(other, result.probe)[0]])
+    dsc = np.array([dice(a, b) for a, b in zip(result.frame_masks, masks)])
+    assert dsc.min() > 0.95 and dsc.mean() > 0.98
+
+
+def test_load_observed_reads_what_the_twin_wrote(twin, tmp_path):
+    from hifumotion.experiment import load_observed
+
+    folder, result = twin
+    obs = load_observed(folder / "observed")
+    assert np.array_equal(obs.frames, result.frames) and np.array_equal(obs.sweep, result.sweep)
+    assert np.allclose(obs.sweep_z_mm, result.probe.sweep_z_mm, atol=1e-4)
+    assert obs.frame_interval_s == pytest.approx(1 / result.config.imaging.frame_rate_hz)
+    assert obs.initial_frame == 0 and len(obs.initial_contour.points_px) == result.config.clinician.points
+    with pytest.raises(InputError, match="setup.json"):
+        load_observed(tmp_path)

@@ -89,7 +89,7 @@ def info(
 
 def _register_subcommands() -> None:
     """Stage commands live beside their stage; importing them registers them on ``app``."""
-    from hifumotion import cli_demo, cli_experiment, cli_imaging, cli_particles, cli_reconstruct, cli_segment  # noqa: F401
+    from hifumotion import cli_demo, cli_experiment, cli_imaging, cli_particles, cli_reconstruct, cli_score, cli_segment  # noqa: F401
 
 
 def main(argv: Optional[list[str]] = None) -> None:

@@ -65,9 +65,9 @@ class ClinicianConfig(ConfigModel):
 
 
 class TwinRunConfig(ConfigModel):
-    mass_scaling: float = Field(3000.0, ge=1.0, description="inertia multiplier of the quasi-static push (weights unchanged; see docs/decisions.md for the tolerance)")
-    settle_s: float = Field(0.3, ge=0, description="damped settling under gravity before t = 0 in s")
-    settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling in 1/s")
+    mass_scaling: float = Field(20000.0, ge=1.0, description="inertia multiplier of the quasi-static push (weights unchanged; see docs/decisions.md for the tolerance)")
+    settle_s: float | None = Field(None, ge=0, description="damped settling under gravity before t = 0 in s; default: 6 periods' worth (6/ω) of the tissue's slowest elastic mode under the mass scaling")
+    settle_damping_per_s: float | None = Field(None, ge=0, description="velocity damping while settling in 1/s; default: 2ω, critical damping of that mode")
     cfl: float = Field(0.4, gt=0, le=1.0, description="safety factor on the time step")
     max_step_s: float = Field(5e-3, gt=0, description="largest time step in s")
     particle_frames_every: int = Field(5, ge=1, description="write every n-th frame's particles as VTU (all frames go to tissue_trajectory.npz)")
@@ -91,10 +91,10 @@ class TwinConfig(ConfigModel):
 #: Overrides of each preset on top of the defaults.
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    # a reduced twin for tests: a coarse model, 40 frames over 4 s, coarse images
+    # a reduced twin for tests: a coarse model, 40 frames over the same 10 s, coarse images
     "small": {
         "resolution": {"model_tissue_particles": 500},
-        "imaging": {"frames": 40, "pixel_mm": 0.4, "sweep_gap_mm": 2.0},
+        "imaging": {"frames": 40, "frame_rate_hz": 4.0, "pixel_mm": 0.4, "sweep_gap_mm": 2.0},
         "run": {"particle_frames_every": 10},
     },
 }

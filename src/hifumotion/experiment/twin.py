@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +36,7 @@ from hifumotion.io import write_json
 from hifumotion.io.files import write_text
 from hifumotion.io.writers import write_contours_csv, write_masks_nifti, write_nifti, write_png_stack
 from hifumotion.particles.scene import ParticleConfig, RunConfig, Scene, TissueConfig
-from hifumotion.particles.section import section
+from hifumotion.particles.section import mapped_section
 from hifumotion.particles.simulate import SimulationResult, simulate
 
 Progress = Callable[[str, float], None]
@@ -65,15 +66,33 @@ def resolution(cfg: TwinConfig, blob: Blob) -> dict:
     return {"blob_volume_mm3": volume, "model_spacing_mm": model, "truth_spacing_mm": truth}
 
 
-def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float) -> Scene:
+def settling(cfg: TwinConfig, height_mm: float) -> tuple[float, float]:
+    """Settling time (s) and damping (1/s): the configured ones, or from the slowest mode.
+
+    The tissue's slowest elastic mode, a quarter wave of shear over its height H, has
+    ω = (π/2) √(E/ρ) / H, slowed √s-fold by the mass scaling s. Critical damping 2ω
+    relaxes it fastest; 6/ω leaves e⁻⁶ of the initial sag. A settling that is too
+    short (0.3 s at s = 2×10⁴) left the tissue sagging into the first second of the
+    push, where it showed as the largest difference between mass scalings.
+    """
+    t = cfg.tissue
+    omega = 0.5 * math.pi * math.sqrt(t.youngs_modulus_pa / t.density_kg_m3) / (height_mm * 1e-3)
+    omega /= math.sqrt(cfg.run.mass_scaling)
+    duration = cfg.run.settle_s if cfg.run.settle_s is not None else 6.0 / omega
+    damping = cfg.run.settle_damping_per_s if cfg.run.settle_damping_per_s is not None else 2.0 * omega
+    return duration, damping
+
+
+def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float, height_mm: float) -> Scene:
     """The particle scene of the truth (re-runnable: ``hifumotion simulate truth/scene.toml``)."""
     im_cfg = cfg.imaging
+    settle_s, settle_damping = settling(cfg, height_mm)
     tissue = TissueConfig(**cfg.tissue.model_dump(), shape="particles", particles_csv=particles_csv)
     return Scene(
         tank=cfg.tank, tissue=tissue, bar=cfg.bar, physics=cfg.physics,
         particles=ParticleConfig(spacing_mm=spacing_mm, support_factor=cfg.resolution.support_factor),
         run=RunConfig(duration_s=(im_cfg.frames - 1) / im_cfg.frame_rate_hz, output_interval_s=1.0 / im_cfg.frame_rate_hz,
-                      settle_s=cfg.run.settle_s, settle_damping_per_s=cfg.run.settle_damping_per_s,
+                      settle_s=settle_s, settle_damping_per_s=settle_damping,
                       mass_scaling=cfg.run.mass_scaling, cfl=cfg.run.cfl, max_step_s=cfg.run.max_step_s,
                       write_vtu=True, vtu_every=cfg.run.particle_frames_every))
 
@@ -144,6 +163,86 @@ def _contours(masks_sections, pixel_mm, labels) -> dict:
     return out
 
 
+def _seeds(cfg: TwinConfig) -> np.ndarray:
+    """One seed per random use (shape, texture, speckle …), all drawn from ``cfg.seed``."""
+    return np.random.default_rng(cfg.seed).integers(0, 2**31 - 1, 8)
+
+
+@dataclass
+class TruthRun:
+    """The physics of the experiment: sample, resolutions, scene and simulation."""
+
+    blob: Blob
+    resolution: dict
+    scene: Scene
+    simulation: SimulationResult
+    spacing_mm: float
+    particles_mm: np.ndarray
+    sample_s: float
+    simulate_s: float
+
+
+def simulate_truth(cfg: TwinConfig, folder: str | Path, progress: Callable[[float], None] | None = None,
+                   particle_factor: float | None = None) -> TruthRun:
+    """Steps 1–2: the seeded sample and its simulation; writes ``blob_particles.csv``,
+    ``scene.toml`` and ``particles/`` (VTU + PVD) into ``folder``.
+
+    ``particle_factor`` overrides ``resolution.truth_particle_factor`` (1.0 simulates at the
+    fitted model's resolution: the floor any fitted model can reach).
+    """
+    folder = Path(folder)
+    (folder / "particles").mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    blob = Blob.random(cfg.blob.size_mm, cfg.blob.irregularity, cfg.blob.lobes, cfg.blob.bottom_cut,
+                       int(_seeds(cfg)[0]))
+    res = resolution(cfg, blob)
+    factor = cfg.resolution.truth_particle_factor if particle_factor is None else particle_factor
+    dx = res["model_spacing_mm"] / factor ** (1 / 3)
+    res["truth_spacing_mm"] = dx
+    pts = blob.particles(dx)
+    particles_csv = folder / "blob_particles.csv"
+    _write_csv(particles_csv, ["x_mm", "y_mm", "z_mm", "volume_mm3"],
+               ([f"{p[0]:.6f}", f"{p[1]:.6f}", f"{p[2]:.6f}", f"{dx ** 3:.6f}"] for p in pts))
+    scene = truth_scene(cfg, particles_csv, dx, float(np.ptp(pts[:, 1]) + dx))
+    from hifumotion.config import dump_toml
+
+    scene_for_file = scene.model_copy(deep=True)
+    scene_for_file.tissue.particles_csv = Path("blob_particles.csv")
+    write_text(folder / "scene.toml", dump_toml(scene_for_file))
+    t1 = time.perf_counter()
+    sim = simulate(scene, folder / "particles", progress=progress)
+    return TruthRun(blob, res, scene, sim, dx, pts, t1 - t0, time.perf_counter() - t1)
+
+
+def truth_sections(truth: TruthRun, probe: im.Probe, progress: Callable[[float], None] | None = None):
+    """Step 3: the true sections of every frame (imaging plane) and sweep plane (at rest).
+
+    The sample's exact rest shape is mapped through the particles' displacement
+    (:func:`~hifumotion.particles.section.mapped_section`), so the truth has the blob's
+    smooth boundary, not the particles' staircase.
+    """
+    tell = progress or (lambda f: None)
+    sim = truth.simulation
+    n = len(sim.times_s) + len(probe.sweep_z_mm)
+    rest = sim.system.tissue_rest * 1000.0
+    # the blob's own frame: undo the scene's placement and the lattice offset
+    shift = rest.mean(0) - truth.particles_mm.mean(0) + truth.blob.offset_mm(truth.spacing_mm)
+
+    def inside(points_mm):
+        return truth.blob.inside(points_mm - shift)
+
+    frame_plane = probe.plane(probe.z_frames_mm)
+    frames = []
+    for k in range(len(sim.times_s)):
+        frames.append(mapped_section(sim.tissue_mm[k], rest, sim.spacing_mm, frame_plane, inside))
+        tell((k + 1) / n)
+    sweep = []
+    for k, z in enumerate(probe.sweep_z_mm):
+        sweep.append(mapped_section(sim.tissue_mm[0], rest, sim.spacing_mm, probe.plane(z), inside))
+        tell((len(sim.times_s) + k + 1) / n)
+    return frames, sweep
+
+
 def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None = None) -> TwinResult:
     """Run the experiment (module docstring) and write ``folder/observed`` and ``folder/truth``.
 
@@ -162,45 +261,22 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     tell = progress or (lambda stage, fraction: None)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    rng = np.random.default_rng(cfg.seed)
-    seeds = rng.integers(0, 2**31 - 1, 8)          # one stream per use, all from cfg.seed
+    seeds = _seeds(cfg)
 
-    # 1. the sample and the resolutions
-    blob = Blob.random(cfg.blob.size_mm, cfg.blob.irregularity, cfg.blob.lobes, cfg.blob.bottom_cut,
-                       int(seeds[0]))
-    res = resolution(cfg, blob)
-    dx = res["truth_spacing_mm"]
-    pts = blob.particles(dx)
-    particles_csv = tru / "blob_particles.csv"
-    _write_csv(particles_csv, ["x_mm", "y_mm", "z_mm", "volume_mm3"],
-               ([f"{p[0]:.6f}", f"{p[1]:.6f}", f"{p[2]:.6f}", f"{dx ** 3:.6f}"] for p in pts))
-    scene = truth_scene(cfg, particles_csv, dx)
-    from hifumotion.config import dump_toml
-    scene_for_file = scene.model_copy(deep=True)
-    scene_for_file.tissue.particles_csv = Path("blob_particles.csv")
-    write_text(tru / "scene.toml", dump_toml(scene_for_file))
-    timings["sample_s"] = time.perf_counter() - t0
-
-    # 2. physics
-    t1 = time.perf_counter()
-    sim = simulate(scene, tru / "particles", progress=lambda f: tell("simulate", f))
-    timings["simulate_s"] = time.perf_counter() - t1
+    # 1–2. the sample, the resolutions and the physics
+    truth = simulate_truth(cfg, tru, lambda f: tell("simulate", f))
+    res, scene, sim, dx = truth.resolution, truth.scene, truth.simulation, truth.spacing_mm
+    timings["sample_s"] = truth.sample_s
+    timings["simulate_s"] = truth.simulate_s
     times = sim.times_s
     rest = sim.tissue_mm[0]
     vol = sim.tissue_volume_mm3
+    pts = truth.particles_mm
 
     # 3. truth sections
     t2 = time.perf_counter()
     probe = im.make_probe(cfg.imaging, rest)
-    frame_plane = probe.plane(probe.z_frames_mm)
-    frame_secs = []
-    for k in range(len(times)):
-        frame_secs.append(section(sim.tissue_mm[k], vol, dx, frame_plane))
-        tell("sections", (k + 1) / (len(times) + len(probe.sweep_z_mm)))
-    sweep_secs = []
-    for k, z in enumerate(probe.sweep_z_mm):
-        sweep_secs.append(section(rest, vol, dx, probe.plane(z)))
-        tell("sections", (len(times) + k + 1) / (len(times) + len(probe.sweep_z_mm)))
+    frame_secs, sweep_secs = truth_sections(truth, probe, lambda f: tell("sections", f))
     frame_masks = np.stack([s.mask for s in frame_secs])
     sweep_masks = np.stack([s.mask for s in sweep_secs])
     timings["sections_s"] = time.perf_counter() - t2
@@ -260,7 +336,7 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
         "tank": {"size_mm": list(cfg.tank.size_mm), "water_depth_mm": cfg.tank.water_depth_mm},
         "bar": {"enabled": cfg.bar.enabled, "radius_mm": cfg.bar.radius_mm, "length_mm": cfg.bar.length_mm,
                 "direction": axis.tolist(), "tip_at_rest_mm": tip0.tolist(),
-                "weight_supported": cfg.bar.weight_supported, "force_ramp_s": cfg.bar.ramp_s},
+                "weight_supported": cfg.bar.weight_supported},
     })
     write_png_stack(tru / "frames", frame_masks, prefix="frame_", digits=4)
     write_png_stack(tru / "sweep", sweep_masks, prefix="slice_", digits=3)

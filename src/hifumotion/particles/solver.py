@@ -185,6 +185,7 @@ class Solver:
         tissue = s.tissue_slice
         self.tissue_inertia = np.ascontiguousarray(s.mass[tissue] * settings.mass_scaling)
         self.tissue_free = (~self.held[tissue]).astype(np.float64)
+        self.viscous_correction = np.zeros((s.n_tissue, 3))   # last implicit change of v (m/s)
         self.pressure = np.zeros(len(s.x))          # water's own, solids' extrapolated (Pa)
         self.volume = s.rest_volume.copy()           # m/ρ for water, rest volume for solids (m³)
         self.work = np.zeros((s.n_tissue, 4, 3, 3))
@@ -308,7 +309,7 @@ class Solver:
             tissue = s.tissue_slice
             self.viscous_iterations = viscosity.implicit_update(
                 s.x, s.v, tissue.start, r.start, r.near_end, r.neighbours, self.viscous_coef,
-                self.tissue_inertia, dt, self.tissue_free)
+                self.tissue_inertia, dt, self.tissue_free, self.viscous_correction)
             self.speed2[tissue] = (s.v[tissue] ** 2).sum(1)
         for body in s.bodies:
             sl = slice(body.first, body.first + body.count)

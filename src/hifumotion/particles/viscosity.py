@@ -140,8 +140,11 @@ def _cg_direction(p, z, beta, free, first, n):
 
 
 @njit(cache=True)
-def _solve(v, first, start, near_end, nbr, coef, inertia, dt, free, tol, max_iter):
-    """Preconditioned CG for the three axes at once (each its own α, β); returns iterations."""
+def _solve(v, first, start, near_end, nbr, coef, inertia, dt, free, guess, tol, max_iter):
+    """Preconditioned CG for the three axes at once (each its own α, β); returns iterations.
+
+    Starts from ``v* + guess`` (the last step's correction: the viscous change is smooth
+    in time, so this saves iterations)."""
     n = start.shape[0] - 1
     diag = np.empty(n)
     _diagonal(start, near_end, coef, inertia, dt, diag)
@@ -150,6 +153,7 @@ def _solve(v, first, start, near_end, nbr, coef, inertia, dt, free, tol, max_ite
     for i in range(n):
         for a in range(3):
             b[i, a] = inertia[i] * v[first + i, a] * free[i, a]
+            v[first + i, a] += guess[i, a] * free[i, a]
     ap = np.empty((n, 3))
     _apply(v, first, start, near_end, nbr, coef, inertia, dt, free, ap)
     r = b - ap
@@ -191,18 +195,20 @@ def _solve(v, first, start, near_end, nbr, coef, inertia, dt, free, tol, max_ite
     return it
 
 
-def implicit_update(x, v, first, start, near_end, nbr, coef, inertia, dt, free,
-                    tol=1e-6, max_iter=200):
+def implicit_update(x, v, first, start, near_end, nbr, coef, inertia, dt, free, guess,
+                    tol=1e-6, max_iter=300):
     """Replace the tissue's velocities ``v[first:first+n]`` (m/s) by the backward-Euler solution.
 
     ``v`` holds v* on entry (after the explicit forces); ``inertia`` is the tissue's
     scaled masses (kg); ``free`` (n, 3) is 1.0 where a component is solved, 0.0 where it
-    is held at its value. ``x`` is advanced by ``dt`` × the velocity correction, so that
-    the positions follow the implicit velocities (symplectic Euler). Returns the CG
+    is held at its value; ``guess`` (n, 3) the expected correction (m/s), replaced by
+    this step's. ``x`` is advanced by ``dt`` × the velocity correction, so that the
+    positions follow the implicit velocities (symplectic Euler). Returns the CG
     iterations used.
     """
     n = len(start) - 1
     before = v[first:first + n].copy()
-    iterations = _solve(v, first, start, near_end, nbr, coef, inertia, dt, free, tol, max_iter)
-    x[first:first + n] += dt * (v[first:first + n] - before)
+    iterations = _solve(v, first, start, near_end, nbr, coef, inertia, dt, free, guess, tol, max_iter)
+    guess[:] = v[first:first + n] - before
+    x[first:first + n] += dt * guess
     return iterations

@@ -1,0 +1,43 @@
+"""``hifumotion score``: Table 4 — predicted masks against the truth, per frame and by set."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from hifumotion.cli import app
+from hifumotion.console import console
+
+
+@app.command()
+def score(
+    prediction_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png predicted masks (0/255)."),
+    truth_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png true masks (an experiment's truth/)."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="New folder for score.csv and score.json (default PREDICTION_DIR/score)."),
+    spacing: Optional[float] = typer.Option(None, "--spacing", help="Pixel size in mm (default: the truth's parameters.json)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
+) -> None:
+    """Score predicted contours: DSC, HD95 and centroid error per frame; training and validation summaries."""
+    from hifumotion.io import output_folder, write_json
+    from hifumotion.io.files import write_text
+    from hifumotion.run_info import RunRecord
+    from hifumotion.scoring import pixel_size_mm, read_frame_masks, score_masks
+
+    pixel = spacing if spacing is not None else pixel_size_mm(truth_dir)
+    record = RunRecord("score", config={"prediction_dir": str(prediction_dir), "truth_dir": str(truth_dir),
+                                        "pixel_mm": pixel})
+    with record.stage("score"):
+        table = score_masks(read_frame_masks(prediction_dir), read_frame_masks(truth_dir), pixel)
+    out_dir = output if output is not None else prediction_dir / "score"
+    with output_folder(out_dir, overwrite) as out:
+        write_text(out / "score.csv", table.to_csv())
+        write_json(out / "score.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows})
+        record.write(out)
+    for name, s in table.summary().items():
+        console.print(f"{name:10s} {len(s['frames']):3d} frames  DSC mean {s['dsc']['mean']:.4f} min "
+                      f"{s['dsc']['min']:.4f}  HD95 mean {s['hd95_mm']['mean']:.2f} mm  centroid error mean "
+                      f"{s['centroid_error_mm']['mean']:.2f} mm max {s['centroid_error_mm']['max']:.2f} mm",
+                      highlight=False)
+    console.print(f"scores in {out_dir.resolve()}", highlight=False)
