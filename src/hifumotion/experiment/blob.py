@@ -78,25 +78,25 @@ class Blob:
         unit = q / np.maximum(r, 1e-12)[..., None]
         return (r <= 1.0 + self.irregularity * self._field(unit)) & (q[..., 1] >= self.cut_y)
 
-    def _lattice_inside(self, spacing_mm: float) -> np.ndarray:
-        a = np.asarray(self.semi_axes_mm) * (1.0 + self.irregularity)
-        axes = [np.arange(-ai, ai + spacing_mm, spacing_mm) for ai in a]
-        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        return grid[self.inside(grid)]
-
-    def offset_mm(self, spacing_mm: float) -> np.ndarray:
-        """The shift :meth:`particles` applies to the blob's own frame (mm)."""
-        pts = self._lattice_inside(spacing_mm)
-        if len(pts) == 0:
-            return np.zeros(3)
-        lo, hi = pts.min(0), pts.max(0)
-        return np.array([-(lo[0] + hi[0]) / 2, spacing_mm / 2 - lo[1], -(lo[2] + hi[2]) / 2])
+    def offset_mm(self) -> np.ndarray:
+        """The shift from the blob's own frame (ellipsoid centre at 0) to the resting frame
+        (cut face at y = 0, x = z = 0 through the ellipsoid's centre), mm."""
+        return np.array([0.0, -self.cut_y * self.semi_axes_mm[1], 0.0])
 
     def particles(self, spacing_mm: float) -> np.ndarray:
-        """Lattice points (mm) inside, shifted by :meth:`offset_mm` so the cut face rests at
-        y = 0 (particle centres half a spacing above) and x = z = 0 is the middle."""
-        pts = self._lattice_inside(spacing_mm)
-        return pts + self.offset_mm(spacing_mm) if len(pts) else pts
+        """Lattice points (mm, resting frame: see :meth:`offset_mm`) inside the sample.
+
+        The lattice is fixed to the sample, not to its sampled points: columns at
+        x, z = (k + ½) Δx about the centre, layers from half a spacing above the cut face.
+        So every resolution puts the same body in the same place."""
+        a = np.asarray(self.semi_axes_mm) * (1.0 + self.irregularity)
+        half = spacing_mm / 2
+        xs = np.arange(-np.ceil(a[0] / spacing_mm), np.ceil(a[0] / spacing_mm)) * spacing_mm + half
+        zs = np.arange(-np.ceil(a[2] / spacing_mm), np.ceil(a[2] / spacing_mm)) * spacing_mm + half
+        y0 = self.cut_y * self.semi_axes_mm[1]
+        ys = y0 + half + np.arange(int(np.ceil((a[1] - y0) / spacing_mm)) + 1) * spacing_mm
+        grid = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1).reshape(-1, 3)
+        return grid[self.inside(grid)] + self.offset_mm()
 
     def volume_mm3(self, samples: int = 400_000, seed: int = 0) -> float:
         """Volume (mm³) by Monte Carlo over the bounding box (±0.3 % at the default samples)."""

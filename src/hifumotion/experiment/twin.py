@@ -83,11 +83,15 @@ def settling(cfg: TwinConfig, height_mm: float) -> tuple[float, float]:
     return duration, damping
 
 
-def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float, height_mm: float) -> Scene:
-    """The particle scene of the truth (re-runnable: ``hifumotion simulate truth/scene.toml``)."""
+def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float, height_mm: float,
+                centre_mm=None) -> Scene:
+    """The particle scene of the truth (re-runnable: ``hifumotion simulate truth/scene.toml``).
+
+    ``centre_mm``, the centre of the particles' bounding box, keeps them where they are."""
     im_cfg = cfg.imaging
     settle_s, settle_damping = settling(cfg, height_mm)
-    tissue = TissueConfig(**cfg.tissue.model_dump(), shape="particles", particles_csv=particles_csv)
+    tissue = TissueConfig(**cfg.tissue.model_dump(), shape="particles", particles_csv=particles_csv,
+                          centre_mm=None if centre_mm is None else tuple(float(c) for c in centre_mm))
     return Scene(
         tank=cfg.tank, tissue=tissue, bar=cfg.bar, physics=cfg.physics,
         particles=ParticleConfig(spacing_mm=spacing_mm, support_factor=cfg.resolution.support_factor),
@@ -177,7 +181,8 @@ class TruthRun:
     scene: Scene
     simulation: SimulationResult
     spacing_mm: float
-    particles_mm: np.ndarray
+    particles_mm: np.ndarray      # rest positions in the tank (mm)
+    placement_mm: np.ndarray      # tank position of the resting frame's origin (mm)
     sample_s: float
     simulate_s: float
 
@@ -198,12 +203,20 @@ def simulate_truth(cfg: TwinConfig, folder: str | Path, progress: Callable[[floa
     res = resolution(cfg, blob)
     factor = cfg.resolution.truth_particle_factor if particle_factor is None else particle_factor
     dx = res["model_spacing_mm"] / factor ** (1 / 3)
-    res["truth_spacing_mm"] = dx
+    wanted = factor * cfg.resolution.model_tissue_particles
     pts = blob.particles(dx)
+    while len(pts) < 0.995 * wanted and factor > 1.0:   # the lattice misses a little of the lumps
+        dx *= 0.995
+        pts = blob.particles(dx)
+    res["truth_spacing_mm"] = dx
+    # the resting frame's origin goes to the middle of the tank floor
+    placement = np.array([cfg.tank.size_mm[0] / 2, 0.0, cfg.tank.size_mm[2] / 2])
+    pts = pts + placement
     particles_csv = folder / "blob_particles.csv"
     _write_csv(particles_csv, ["x_mm", "y_mm", "z_mm", "volume_mm3"],
                ([f"{p[0]:.6f}", f"{p[1]:.6f}", f"{p[2]:.6f}", f"{dx ** 3:.6f}"] for p in pts))
-    scene = truth_scene(cfg, particles_csv, dx, float(np.ptp(pts[:, 1]) + dx))
+    scene = truth_scene(cfg, particles_csv, dx, float(np.ptp(pts[:, 1]) + dx),
+                        centre_mm=(pts.min(0) + pts.max(0)) / 2)
     from hifumotion.config import dump_toml
 
     scene_for_file = scene.model_copy(deep=True)
@@ -211,7 +224,7 @@ def simulate_truth(cfg: TwinConfig, folder: str | Path, progress: Callable[[floa
     write_text(folder / "scene.toml", dump_toml(scene_for_file))
     t1 = time.perf_counter()
     sim = simulate(scene, folder / "particles", progress=progress)
-    return TruthRun(blob, res, scene, sim, dx, pts, t1 - t0, time.perf_counter() - t1)
+    return TruthRun(blob, res, scene, sim, dx, pts, placement, t1 - t0, time.perf_counter() - t1)
 
 
 def truth_sections(truth: TruthRun, probe: im.Probe, progress: Callable[[float], None] | None = None):
@@ -225,8 +238,8 @@ def truth_sections(truth: TruthRun, probe: im.Probe, progress: Callable[[float],
     sim = truth.simulation
     n = len(sim.times_s) + len(probe.sweep_z_mm)
     rest = sim.system.tissue_rest * 1000.0
-    # the blob's own frame: undo the scene's placement and the lattice offset
-    shift = rest.mean(0) - truth.particles_mm.mean(0) + truth.blob.offset_mm(truth.spacing_mm)
+    # the blob's own frame: undo the placement in the tank and the resting frame's offset
+    shift = truth.placement_mm + truth.blob.offset_mm()
 
     def inside(points_mm):
         return truth.blob.inside(points_mm - shift)
