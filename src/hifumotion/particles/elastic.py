@@ -52,6 +52,8 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
+from hifumotion.particles.viscosity import rheological_mu
+
 
 
 @dataclass(frozen=True)
@@ -386,7 +388,6 @@ def force_pass(x, v, first, start, near_end, nbr, offsets, hg_coef, grad_w, grad
     n = start.shape[0] - 1
     mu_seen = np.zeros(n)
     lap_coef = 45.0 / (math.pi * support ** 6)
-    sqrt_rate = beta2 == 0.5
     for i in prange(n):
         gi = first + i
         fx = 0.0
@@ -441,18 +442,7 @@ def force_pass(x, v, first, start, near_end, nbr, offsets, hg_coef, grad_w, grad
                 v0 = v[gj, 0] - v[gi, 0]
                 v1 = v[gj, 1] - v[gi, 1]
                 v2 = v[gj, 2] - v[gi, 2]
-                c0 = v1 * r2 - v2 * r1
-                c1 = v2 * r0 - v0 * r2
-                c2 = v0 * r1 - v1 * r0
-                rate = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) / (r * r)
-                if rate < rate_floor:
-                    rate = rate_floor
-                if sqrt_rate:
-                    mu = beta1 * math.sqrt(rate)
-                else:
-                    mu = beta1 * math.exp(beta2 * math.log(rate))
-                if mu > mu_max:
-                    mu = mu_max
+                mu = rheological_mu(v0, v1, v2, r0, r1, r2, r, beta1, beta2, mu_max, rate_floor)
                 if mu > mu_i:
                     mu_i = mu
                 sc = mu * vol_i * volume[j] * lap_coef * (support - r)

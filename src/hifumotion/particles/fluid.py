@@ -175,27 +175,25 @@ def pair_forces(x, v, mass, volume, phase, pressure, first, table, counts, h, h_
                         fy += t * (v[j, 1] - v[i, 1])
                         fz += t * (v[j, 2] - v[i, 2])
                     continue
-                # water and tank: pressure, and a penalty that only acts closer than one
-                # spacing (¾ of it), so that water squeezed under a solid cannot be pushed through
+                # water and tank: pressure, and a penalty that only acts closer than ¾ of a
+                # spacing (untouched by hydrostatic compression, ≪ 25 %), so that water squeezed
+                # under a solid cannot be pushed through the floor
                 if pi_phase == WALL or pj_phase == WALL:
-                    hw = 0.75 * h_contact  # untouched by hydrostatic compression (≪ 25 %)
-                    if k_wall == 0.0 or r >= hw:
-                        continue
-                    c = k_wall * mass[i] * mass[j] * cubic_dw(r, hw) / r
-                    fx += c * r0
-                    fy += c * r1
-                    fz += c * r2
-                    continue
-                kc = k_fluid
+                    kc = k_wall
+                    hc = 0.75 * h_contact
+                else:
+                    kc = k_fluid
+                    hc = h_contact
             elif pi_phase == pj_phase and pi_phase != RIGID:
                 continue
             else:
                 kc = k_contact
-            if kc == 0.0 or r >= h_contact:
+                hc = h_contact
+            if kc == 0.0 or r >= hc:
                 continue
             # Eq. 18: f_i = −K_c m_i m_j ∇W(x_i − x_j) = K_c m_i m_j dW/dr · r_vec / r;
             # dW/dr < 0, so the force points away from j (a repulsion)
-            c = kc * mass[i] * mass[j] * cubic_dw(r, h_contact) / r
+            c = kc * mass[i] * mass[j] * cubic_dw(r, hc) / r
             fx += c * r0
             fy += c * r1
             fz += c * r2

@@ -30,6 +30,19 @@ import numpy as np
 from numba import njit, prange
 
 
+@njit(inline="always", fastmath=True, error_model="numpy")
+def rheological_mu(v0, v1, v2, r0, r1, r2, r, beta1, beta2, mu_max, rate_floor):
+    """Eq. 16's μ = β₁ (|v_ij × r_ij| / |r_ij|²)^β₂ (Pa·s), rate floored, μ capped."""
+    c0 = v1 * r2 - v2 * r1
+    c1 = v2 * r0 - v0 * r2
+    c2 = v0 * r1 - v1 * r0
+    rate = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) / (r * r)
+    if rate < rate_floor:
+        rate = rate_floor
+    mu = beta1 * math.sqrt(rate) if beta2 == 0.5 else beta1 * math.exp(beta2 * math.log(rate))
+    return mu_max if mu > mu_max else mu
+
+
 @njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def pair_coefficients(x, v, first, start, near_end, nbr, volume, support, beta1, beta2, mu_max,
                       rate_floor, coef):
@@ -41,7 +54,6 @@ def pair_coefficients(x, v, first, start, near_end, nbr, volume, support, beta1,
     n = start.shape[0] - 1
     mu_seen = np.zeros(max(n, 1))
     lap = 45.0 / (math.pi * support ** 6)
-    sqrt_rate = beta2 == 0.5
     for i in prange(n):
         gi = first + i
         mu_i = 0.0
@@ -54,21 +66,8 @@ def pair_coefficients(x, v, first, start, near_end, nbr, volume, support, beta1,
             r = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
             if r <= 0.0 or r >= support:
                 continue
-            v0 = v[gj, 0] - v[gi, 0]
-            v1 = v[gj, 1] - v[gi, 1]
-            v2 = v[gj, 2] - v[gi, 2]
-            c0 = v1 * r2 - v2 * r1
-            c1 = v2 * r0 - v0 * r2
-            c2 = v0 * r1 - v1 * r0
-            rate = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) / (r * r)
-            if rate < rate_floor:
-                rate = rate_floor
-            if sqrt_rate:
-                mu = beta1 * math.sqrt(rate)
-            else:
-                mu = beta1 * math.exp(beta2 * math.log(rate))
-            if mu > mu_max:
-                mu = mu_max
+            mu = rheological_mu(v[gj, 0] - v[gi, 0], v[gj, 1] - v[gi, 1], v[gj, 2] - v[gi, 2],
+                                r0, r1, r2, r, beta1, beta2, mu_max, rate_floor)
             if mu > mu_i:
                 mu_i = mu
             coef[k] = mu * volume[i] * volume[nbr[k]] * lap * (support - r)
