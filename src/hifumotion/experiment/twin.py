@@ -56,6 +56,7 @@ class TwinResult:
     simulation: SimulationResult
     facts: dict = field(default_factory=dict)
     timings_s: dict = field(default_factory=dict)
+    motion: dict = field(default_factory=dict)   # motion.json: centroid path, area, checks
 
 
 def resolution(cfg: TwinConfig, blob: Blob) -> dict:
@@ -304,18 +305,20 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     texture = im.Texture(-np.full(3, 2.0), size + 2.0, cfg.imaging.echo_texture, np.random.default_rng(seeds[1]))
     trans = im.transducer(cfg.imaging, probe, rest)
     extent = (probe.shape[0] * probe.pixel_mm, probe.shape[1] * probe.pixel_mm)
+
+    def echo_map(z: float, tissue_mask: np.ndarray) -> im.EchoMap:
+        bar = (im.bar_mask(probe, z, tip0, axis, cfg.bar.radius_mm, cfg.bar.length_mm) if cfg.bar.enabled
+               else np.zeros(probe.shape, bool))
+        return im.EchoMap(cfg.imaging, probe, z, tissue_mask, bar, cfg.tank.water_depth_mm, texture)
+
     sweep_images = []
     for k, z in enumerate(probe.sweep_z_mm):
-        echo = im.EchoMap(cfg.imaging, probe, z, sweep_masks[k],
-                          im.bar_mask(probe, z, tip0, axis, cfg.bar.radius_mm, cfg.bar.length_mm) if cfg.bar.enabled
-                          else np.zeros(probe.shape, bool), cfg.tank.water_depth_mm, texture)
+        echo = echo_map(z, sweep_masks[k])
         scat = im.Scatterers.uniform(extent, trans, int(seeds[2]) + k)
         sweep_images.append(im.render(echo, scat, None, probe, trans, int(seeds[3]), sweep_masks[k]).image)
         tell("images", (k + 1) / (len(probe.sweep_z_mm) + len(times)))
     z0 = probe.z_frames_mm
-    echo0 = im.EchoMap(cfg.imaging, probe, z0, frame_masks[0],
-                       im.bar_mask(probe, z0, tip0, axis, cfg.bar.radius_mm, cfg.bar.length_mm) if cfg.bar.enabled
-                       else np.zeros(probe.shape, bool), cfg.tank.water_depth_mm, texture)
+    echo0 = echo_map(z0, frame_masks[0])
     speckle = im.MovingSpeckle(echo0, im.Scatterers.uniform(extent, trans, int(seeds[4])), rest, dx)
     frames = []
     for k in range(len(times)):
@@ -390,12 +393,11 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     timings["write_s"] = time.perf_counter() - t4
     timings["total_s"] = time.perf_counter() - t0
     facts["steps"] = sim.steps
-    return TwinResult(cfg, times, frames, frame_masks, sweep, sweep_masks, probe, sim, facts, timings)
+    return TwinResult(cfg, times, frames, frame_masks, sweep, sweep_masks, probe, sim, facts, timings, motion)
 
 
 def summary_line(result: TwinResult) -> str:
-    m = motion_summary(result.frame_masks, result.probe.pixel_mm, result.times_s, result.simulation.tissue_mm,
-                       result.facts["truth_spacing_mm"], result.config.tank.size_mm)
+    m = result.motion
     return (f"{len(result.times_s)} frames over {result.times_s[-1]:.1f} s; centroid moved "
             f"{m['centroid_displacement_mm']:.2f} mm, area changed {m['area_change_mm2']:+.1f} mm² "
             f"({100 * m['area_change_fraction']:+.1f} %)")
