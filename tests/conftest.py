@@ -27,3 +27,12 @@ def disc(shape: tuple[int, int], cx: float, cy: float, r: float) -> np.ndarray:
     """Pixels whose centre is within ``r`` of ``(cx, cy)`` (x = column, y = row)."""
     rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
     return (cols - cx) ** 2 + (rows - cy) ** 2 <= r**2
+
+
+@pytest.fixture(scope="session")
+def small_twin(tmp_path_factory):
+    """The small synthetic experiment (seed 1), generated once per test process: ``(folder, TwinResult)``."""
+    from hifumotion.experiment import generate_twin, twin_config
+
+    folder = tmp_path_factory.mktemp("small_twin")
+    return folder, generate_twin(twin_config("small", seed=1), folder)

@@ -17,10 +17,8 @@ from hifumotion.metrics import dice
 
 
 @pytest.fixture(scope="module")
-def twin(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("twin")
-    result = generate_twin(twin_config("small", seed=1), folder)
-    return folder, result
+def twin(small_twin):
+    return small_twin
 
 
 def _digest(folder: Path, pattern: str) -> str:

@@ -89,7 +89,8 @@ def info(
 
 def _register_subcommands() -> None:
     """Stage commands live beside their stage; importing them registers them on ``app``."""
-    from hifumotion import cli_demo, cli_experiment, cli_imaging, cli_particles, cli_reconstruct, cli_score, cli_segment  # noqa: F401
+    from hifumotion import (cli_demo, cli_estimation, cli_experiment, cli_imaging, cli_particles,  # noqa: F401
+                            cli_reconstruct, cli_score, cli_segment)
 
 
 def main(argv: Optional[list[str]] = None) -> None:

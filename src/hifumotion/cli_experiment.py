@@ -24,7 +24,7 @@ def experiment(
 ) -> None:
     """Generate the digital twin of the paper's experiment: a sweep, 200 frames, a clicked contour, and the truth."""
     from hifumotion.config import dump_toml
-    from hifumotion.console import progress_fraction
+    from hifumotion.console import StageBars
     from hifumotion.experiment import generate_twin, summary_line, twin_config
     from hifumotion.io import output_folder
     from hifumotion.run_info import RunRecord
@@ -38,22 +38,8 @@ def experiment(
     record = RunRecord("experiment", config=json.loads(cfg.model_dump_json()), seed=cfg.seed)
     record.extra["preset"] = preset
     with output_folder(output, overwrite) as out:
-        bars: dict = {}   # one progress bar per stage, opened when the stage starts
-
-        def progress(stage: str, fraction: float) -> None:
-            if stage not in bars:
-                for bar in bars.values():
-                    bar.__exit__(None, None, None)
-                bars.clear()
-                bars[stage] = progress_fraction(stage).__enter__()
-            bars[stage](fraction)
-
-        with record.stage("experiment"):
-            try:
-                result = generate_twin(cfg, out, progress)
-            finally:
-                for bar in bars.values():
-                    bar.__exit__(None, None, None)
+        with StageBars() as progress, record.stage("experiment"):
+            result = generate_twin(cfg, out, progress)
         record.extra["timings_s"] = result.timings_s
         record.extra["facts"] = result.facts
         record.write(out)

@@ -17,23 +17,38 @@ def score(
     truth_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png true masks (an experiment's truth/)."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New folder for score.csv and score.json (default PREDICTION_DIR/score)."),
     spacing: Optional[float] = typer.Option(None, "--spacing", help="Pixel size in mm (default: the truth's parameters.json)."),
+    images: Optional[Path] = typer.Option(None, "--images", help="The observed frames (frame_NNNN.png) for the overlays (default: TRUTH_DIR/../observed/frames if present)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Score predicted contours: DSC, HD95 and centroid error per frame; training and validation summaries."""
     from hifumotion.io import output_folder, write_json
     from hifumotion.io.files import write_text
     from hifumotion.run_info import RunRecord
-    from hifumotion.scoring import pixel_size_mm, read_frame_masks, score_masks
+    from hifumotion.errors import InputError
+    from hifumotion.scoring import overlay_figure, pixel_size_mm, read_frame_masks, score_masks
 
     pixel = spacing if spacing is not None else pixel_size_mm(truth_dir)
     record = RunRecord("score", config={"prediction_dir": str(prediction_dir), "truth_dir": str(truth_dir),
                                         "pixel_mm": pixel})
+    predicted, truth = read_frame_masks(prediction_dir), read_frame_masks(truth_dir)
     with record.stage("score"):
-        table = score_masks(read_frame_masks(prediction_dir), read_frame_masks(truth_dir), pixel)
+        table = score_masks(predicted, truth, pixel)
+    frames_dir = images if images is not None else truth_dir.parent / "observed" / "frames"
+    if images is not None and not images.is_dir():
+        raise InputError("no such folder of observed frames", images)
     out_dir = output if output is not None else prediction_dir / "score"
     with output_folder(out_dir, overwrite) as out:
         write_text(out / "score.csv", table.to_csv())
         write_json(out / "score.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows})
+        if frames_dir.is_dir():
+            from hifumotion.io.raster import read_raster_array
+
+            wanted = [r["frame"] for r in table.rows if r["set"] in ("training", "validation")] or \
+                [r["frame"] for r in table.rows]
+            pictures = {f: read_raster_array(p)[0] for f in wanted
+                        if (p := frames_dir / f"frame_{f:04d}.png").is_file()}
+            if pictures:
+                overlay_figure(pictures, truth, predicted, wanted, out / "overlays.png")
         record.write(out)
     for name, s in table.summary().items():
         console.print(f"{name:10s} {len(s['frames']):3d} frames  DSC mean {s['dsc']['mean']:.4f} min "

@@ -77,3 +77,30 @@ class _Fraction:
 def progress_fraction(description: str) -> _Fraction:
     """``with progress_fraction("simulate") as update: update(0.5)`` — a bar on standard error."""
     return _Fraction(description)
+
+
+class StageBars:
+    """``progress(stage, fraction)`` for a run of stages: one bar per stage, opened as it starts.
+
+    Use as a context manager; the open bar is closed on exit (also after an error)."""
+
+    def __init__(self):
+        self.bars: dict[str, _Fraction] = {}
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if stage not in self.bars:
+            self.close()
+            self.bars[stage] = progress_fraction(stage).__enter__()
+        self.bars[stage](fraction)
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.__exit__(None, None, None)
+        self.bars.clear()
+
+    def __enter__(self) -> "StageBars":
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.close()
+        return False

@@ -60,11 +60,21 @@ class ScoreTable:
 
 
 def score_masks(predicted: dict[int, np.ndarray], truth: dict[int, np.ndarray], spacing_mm,
-                training=TRAINING_FRAMES, validation=VALIDATION_FRAMES) -> ScoreTable:
-    """Score every frame present in both (masks as bool arrays on the same grid)."""
+                training=None, validation=None) -> ScoreTable:
+    """Score every frame present in both (masks as bool arrays on the same grid).
+
+    The sets default to the paper's protocol scaled to the truth's series length
+    (:func:`~hifumotion.estimation.protocol.default_frames`: 20, 30 … 100 and 110 … 190 for 200 frames)."""
+    from hifumotion.estimation.protocol import default_frames
+
     common = sorted(set(predicted) & set(truth))
     if not common:
         raise InputError("no frame number is in both the prediction and the truth")
+    if training is None or validation is None:
+        n = max(truth) + 1
+        auto_train, auto_valid = default_frames(n) if n >= 20 else (TRAINING_FRAMES, VALIDATION_FRAMES)
+        training = auto_train if training is None else training
+        validation = auto_valid if validation is None else validation
     table = ScoreTable()
     for f in common:
         p, t = np.asarray(predicted[f], bool), np.asarray(truth[f], bool)
@@ -79,6 +89,35 @@ def score_masks(predicted: dict[int, np.ndarray], truth: dict[int, np.ndarray], 
             "centroid_error_mm": float("inf") if empty else centroid_distance(p, t, spacing_mm),
         })
     return table
+
+
+def overlay_figure(images: dict[int, np.ndarray], truth: dict[int, np.ndarray], predicted: dict[int, np.ndarray],
+                   frames, path: str | Path, columns: int = 5) -> Path:
+    """The paper's Fig. 4: frames with the true (green) and predicted (red) contours, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hifumotion.io.files import atomic_path
+
+    frames = [f for f in frames if f in images and f in truth and f in predicted]
+    if not frames:
+        raise InputError("no frame has an image, a true and a predicted mask", path)
+    rows = (len(frames) + columns - 1) // columns
+    fig, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 3.0 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, f in zip(axes.ravel(), frames):
+        ax.imshow(images[f], cmap="gray", origin="lower")
+        ax.contour(truth[f], [0.5], colors="lime", linewidths=1.0)
+        ax.contour(predicted[f], [0.5], colors="red", linewidths=1.0)
+        ax.set_title(f"frame {f}  DSC {dice(predicted[f], truth[f]):.3f}", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+    return Path(path)
 
 
 def read_frame_masks(folder: str | Path) -> dict[int, np.ndarray]:

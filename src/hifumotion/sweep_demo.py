@@ -45,20 +45,11 @@ def blob_inside(x, y, z, radius=8.0, seed=3):
     return rr <= bound
 
 
-def region_contrast(image: np.ndarray, mask: np.ndarray, ring_px: int = 8) -> float:
-    """|mean inside − mean in a ring just outside| / std of the image: does the region stand out?"""
-    img = image.astype(float)
-    ring = ndimage.binary_dilation(mask, iterations=ring_px) & ~mask
-    if not mask.any() or not ring.any():
-        return 0.0
-    return float(abs(img[mask].mean() - img[ring].mean()) / (img.std() + 1e-12))
-
-
 def simulate_sweep(gap_mm: float = 1.0, size_px: int = 192, spacing_mm: float = 0.15, seed: int = 0) -> SweepResult:
     """Simulate, segment and collect a sweep; see the module docstring."""
     from hifumotion.contour import parse_init_entry
     from hifumotion.metrics import dice
-    from hifumotion.segmentation import segment
+    from hifumotion.segmentation.sweep import segment_sweep
 
     rows, cols = np.mgrid[0:size_px, 0:size_px]
     x = (cols - size_px / 2) * spacing_mm
@@ -75,23 +66,7 @@ def simulate_sweep(gap_mm: float = 1.0, size_px: int = 192, spacing_mm: float = 
     ])
     # segment from the middle plane outwards, each plane starting from its neighbour's contour
     middle = int(np.argmax(truth.reshape(len(truth), -1).sum(axis=1)))
-    masks = np.zeros_like(truth)
-    first = segment(images[middle], parse_init_entry(initial_contours(truth[middle], rng)), "glcv")
-    masks[middle] = first.mask
-    scale = {"radius": first.params["radius_px"], "sigma": first.params["sigma_px"], "kappa1": first.params["kappa1"]}
-    min_area = 0.02 * first.mask.sum()
-    reference = region_contrast(images[middle], first.mask)
-    for direction in (1, -1):
-        previous = first.mask
-        k = middle + direction
-        while 0 <= k < len(images) and previous.sum() > min_area:
-            result = segment(images[k], previous, "glcv", multiscale=False, max_iterations=60, **scale)
-            # the sweep has left the tissue when the region no longer stands out from its surroundings
-            if result.mask.sum() <= min_area or region_contrast(images[k], result.mask) < 0.5 * reference:
-                break
-            masks[k] = result.mask
-            previous = masks[k]
-            k += direction
+    masks = segment_sweep(images, parse_init_entry(initial_contours(truth[middle], rng)), middle, "glcv").masks
     present = truth.reshape(len(truth), -1).any(axis=1)
     dsc = np.array([dice(m, t) for m, t in zip(masks[present], truth[present])])
     # the truth's volume by counting a fine grid of the same function

@@ -54,7 +54,7 @@ class ImagingConfig(ConfigModel):
     dynamic_range_db: float = Field(50.0, gt=0, description="log-compression dynamic range in dB")
     tissue_echogenicity: float = Field(1.0, gt=0, description="backscatter power of the tissue (relative)")
     echo_texture: float = Field(0.35, ge=0, lt=1, description="relative variation of the tissue's backscatter (smooth, 1.5 mm scale)")
-    water_echogenicity: float = Field(0.02, ge=0, description="backscatter power of the water (relative)")
+    water_echogenicity: float = Field(1e-4, ge=0, description="backscatter power of the water (relative; degassed water is nearly anechoic, −40 dB)")
     floor_echogenicity: float = Field(5.0, ge=0, description="backscatter power of the tank's membrane floor (relative)")
     bar_echogenicity: float = Field(30.0, ge=0, description="backscatter power of the metal bar (relative)")
 

@@ -102,7 +102,7 @@ class BarConfig(ConfigModel):
     radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar (its flat pushing end) in mm")
     length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
     direction: tuple[float, float, float] = Field((0.0, -1.0, 0.0), description="unit vector the bar points and pushes along (default: down onto the tissue)")
-    tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: two spacings short of the tissue, on the axis through its centre")
+    tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: touching the tissue (one spacing from the first tissue particle under its end face), on the axis through the tissue's centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
     weight_supported: bool = Field(True, description="the hand holding the bar carries its weight, so the push on the tissue is force_n alone")
     force_n: float = Field(0.25, description="pushing force held after the ramp, in N (Table 3: 0.25)")
@@ -232,10 +232,17 @@ def bar_particles_mm(cfg: BarConfig, tissue_mm: np.ndarray, spacing_mm: float
     axis = np.asarray(cfg.direction, float)
     axis /= np.linalg.norm(axis)
     if cfg.tip_mm is None:
-        # two spacings short of the tissue's surface, on the axis through its centre
+        # touching the tissue, on the axis through its centre: one spacing (where the contact
+        # force of Eq. 18 begins) before the first tissue particle under the bar's end face. A
+        # gap would let the force accelerate the bar freely and strike the tissue (its work
+        # F × gap turned into an impact), which a slow push does not do.
         centre = tissue_mm.mean(0)
-        along = (tissue_mm - centre) @ axis
-        tip = centre + (along.min() - 2.0 * spacing_mm) * axis
+        rel = tissue_mm - centre
+        along = rel @ axis
+        across = np.linalg.norm(rel - along[:, None] * axis, axis=1)
+        under = across <= cfg.radius_mm
+        first = along[under].min() if under.any() else along.min()
+        tip = centre + (first - 1.0 * spacing_mm) * axis
     else:
         tip = np.asarray(cfg.tip_mm, float)
     r, length = cfg.radius_mm, cfg.length_mm
@@ -252,11 +259,21 @@ def bar_particles_mm(cfg: BarConfig, tissue_mm: np.ndarray, spacing_mm: float
     return pts, axis, tip
 
 
-def build_scene(scene: Scene) -> tuple[ParticleSystem, dict]:
-    """The particle system of a scene (SI) and facts about it (counts, masses, mm geometry)."""
+def build_scene(scene: Scene, tissue_particles: tuple[np.ndarray, np.ndarray] | None = None
+                ) -> tuple[ParticleSystem, dict]:
+    """The particle system of a scene (SI) and facts about it (counts, masses, mm geometry).
+
+    ``tissue_particles`` — ``(positions_mm (N, 3), volumes_mm3 (N,))`` in the tank frame —
+    replaces the scene's tissue shape with particles held in memory (a fitted model's
+    many runs, and Dask workers that do not share the caller's files).
+    """
     dx_mm = scene.particles.spacing_mm
     tank = scene.tank
-    tissue_mm, vol_mm3 = tissue_particles_mm(scene.tissue, tank, dx_mm)
+    if tissue_particles is None:
+        tissue_mm, vol_mm3 = tissue_particles_mm(scene.tissue, tank, dx_mm)
+    else:
+        tissue_mm = np.asarray(tissue_particles[0], float)
+        vol_mm3 = np.asarray(tissue_particles[1], float)
     size = np.asarray(tank.size_mm, float)
     if np.any(tissue_mm < 0) or np.any(tissue_mm > size):
         raise InputError("the tissue does not fit inside the tank", "tissue")

@@ -121,25 +121,57 @@ def section(positions_mm: np.ndarray, volumes_mm3: np.ndarray, spacing_mm: float
     return Section(mask, colour, contour_px, contour_px * plane.pixel_mm, plane)
 
 
+def displacement_at(points_mm: np.ndarray, positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float,
+                    smoothing_factor: float = 2.0, neighbours: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """The particles' displacement ``u = x − X`` (mm) at arbitrary points, and where it is known.
+
+    Shepard interpolation with cubic-kernel weights of support ``smoothing_factor ×
+    spacing_mm`` around each point; exact for rigid motions and uniform strains. Returns
+    ``u`` ``(P, 3)`` and ``covered`` ``(P,)`` (a particle lies within the support; ``u``
+    is 0 elsewhere).
+    """
+    from scipy.spatial import cKDTree
+
+    from hifumotion.particles.kernels import kernel
+
+    x = np.asarray(positions_mm, float)
+    q = np.asarray(points_mm, float).reshape(-1, 3)
+    disp = x - np.asarray(rest_mm, float)
+    h = smoothing_factor * float(spacing_mm)
+    u = np.zeros((len(q), 3))
+    lo, hi = q.min(0) - h, q.max(0) + h
+    near = np.all((x >= lo) & (x <= hi), axis=1)  # only particles that can reach a point
+    if not near.any():
+        return u, np.zeros(len(q), bool)
+    tree = cKDTree(x[near])
+    dist, idx = tree.query(q, k=min(neighbours, int(near.sum())), distance_upper_bound=h)
+    dist = dist.reshape(len(q), -1)
+    idx = idx.reshape(len(q), -1)
+    found = np.isfinite(dist)
+    w = np.where(found, kernel(np.where(found, dist, h), h), 0.0)
+    total = w.sum(1)
+    covered = total > 0
+    d_near = disp[near]
+    safe = np.where(found, idx, 0)
+    u[covered] = (w[covered, :, None] * d_near[safe[covered]]).sum(1) / total[covered, None]
+    return u, covered
+
+
 def mapped_section(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float, plane: Plane,
                    inside_rest, smoothing_factor: float = 2.0, neighbours: int = 32) -> Section:
     """The section of a body whose rest shape is known: ``inside_rest(points_mm) -> bool``.
 
     The displacement ``u = x − X`` of the particles (current ``positions_mm``, rest
-    ``rest_mm``) is interpolated at each pixel centre q by Shepard weights of the cubic
-    kernel with support ``smoothing_factor × spacing_mm``; q is inside when
-    ``inside_rest(q − u(q))`` and at least one particle is within the support. Exact for
-    any displacement the interpolation reproduces (rigid motions, affine strains), and
-    free of the particles' sampling of the surface, so two resolutions of the same body
-    differ only by their physics. Contours as in :func:`section` (of the 0/1 mask).
+    ``rest_mm``) is interpolated at each pixel centre q (:func:`displacement_at`);
+    q is inside when ``inside_rest(q − u(q))`` and at least one particle is within the
+    support. Exact for any displacement the interpolation reproduces (rigid motions,
+    affine strains), and free of the particles' sampling of the surface, so two
+    resolutions of the same body differ only by their physics. Contours as in
+    :func:`section` (of the 0/1 mask).
     """
-    from scipy.spatial import cKDTree
     from skimage import measure
 
-    from hifumotion.particles.kernels import kernel
-
     x = np.asarray(positions_mm, float)
-    disp = x - np.asarray(rest_mm, float)
     h = smoothing_factor * float(spacing_mm)
     pts = plane.points_mm().reshape(-1, 3)
     mask = np.zeros(len(pts), bool)
@@ -147,18 +179,9 @@ def mapped_section(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: fl
     normal = np.cross(np.asarray(plane.u, float), np.asarray(plane.v, float))
     near_plane = np.abs((x - o) @ normal) < h
     if near_plane.any():
-        tree = cKDTree(x[near_plane])
-        dist, idx = tree.query(pts, k=min(neighbours, int(near_plane.sum())), distance_upper_bound=h)
-        dist = dist.reshape(len(pts), -1)
-        idx = idx.reshape(len(pts), -1)
-        found = np.isfinite(dist)
-        w = np.where(found, kernel(np.where(found, dist, h), h), 0.0)
-        total = w.sum(1)
-        covered = total > 0
-        d_near = disp[near_plane]
-        safe = np.where(found, idx, 0)
-        u = (w[covered, :, None] * d_near[safe[covered]]).sum(1) / total[covered, None]
-        mask[covered] = np.asarray(inside_rest(pts[covered] - u), bool)
+        u, covered = displacement_at(pts, x[near_plane], np.asarray(rest_mm, float)[near_plane], spacing_mm,
+                                     smoothing_factor, neighbours)
+        mask[covered] = np.asarray(inside_rest(pts[covered] - u[covered]), bool)
     mask = mask.reshape(plane.shape)
     contours = measure.find_contours(mask.astype(float), 0.5) if mask.any() else []
     contour_px = max(contours, key=len)[:, ::-1].copy() if contours else np.zeros((0, 2))

@@ -54,12 +54,14 @@ class SimulationResult:
 
 
 def simulate(scene: Scene, folder: str | Path | None = None,
-             progress: Callable[[float], None] | None = None) -> SimulationResult:
+             progress: Callable[[float], None] | None = None,
+             tissue_particles: tuple[np.ndarray, np.ndarray] | None = None) -> SimulationResult:
     """Run ``scene``; write VTU/PVD/CSV into ``folder`` (if given and ``run.write_vtu``).
 
-    ``progress(fraction)`` is called after every frame.
+    ``progress(fraction)`` is called after every frame; ``tissue_particles`` as in
+    :func:`~hifumotion.particles.scene.build_scene`.
     """
-    system, facts = build_scene(scene)
+    system, facts = build_scene(scene, tissue_particles)
     run = scene.run
     if run.settle_s > 0:
         held = [(b, b.fixed) for b in system.bodies]

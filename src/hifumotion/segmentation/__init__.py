@@ -186,7 +186,8 @@ def _segment_window(image: np.ndarray, start: np.ndarray, method: str, spacing, 
 
 
 def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | None = None, spacing=None,
-          predict_motion: bool = True, progress: bool = False, **params: Any) -> TrackResult:
+          predict_motion: bool = True, progress: bool = False, exclude: np.ndarray | None = None,
+          **params: Any) -> TrackResult:
     """Segment every frame of a cine loop, each starting from the previous frame's contour.
 
     The first frame starts from ``init``. Later frames start from the previous
@@ -208,6 +209,10 @@ def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | No
         Move the previous contour by the phase-correlation shift before refining it.
     progress
         Show a progress bar.
+    exclude
+        Pixels known not to be the target, ``(H, W)`` for every frame or ``(T, H, W)``
+        (a pool's floor, where an instrument is): removed from each frame's result
+        before the next frame starts from it.
     """
     from hifumotion.console import track as progress_bar
     from hifumotion.sequence import ImageSequence
@@ -237,6 +242,14 @@ def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | No
             result = _segment_window(frames[t], start, method, spacing, int(carried["radius"]) + 12, extra)
         else:
             result = segment(frames[t], start, method, spacing, **extra)
+        if exclude is not None:
+            from dataclasses import replace
+
+            ex = exclude[t] if exclude.ndim == 3 else exclude
+            kept = result.mask & ~ex
+            if kept.any() and not np.array_equal(kept, result.mask):
+                result = replace(result, mask=kept, contour=Contour.from_mask(kept, result.contour.spacing_mm
+                                                                            if result.contour is not None else None))
         results.append(result)
         if t == 0:
             # keep the scale of the first frame: a previous contour is no rough inside start

@@ -1,0 +1,141 @@
+"""``hifumotion calibrate`` and ``hifumotion predict``: fit the particle model, then predict the frames."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from hifumotion.cli import app
+from hifumotion.console import console
+from hifumotion.errors import InputError
+
+
+@app.command()
+def calibrate(
+    observed_dir: Path = typer.Argument(..., help="An observed experiment folder (setup.json, sweep/, frames/, initial_contour.csv)."),
+    output: Path = typer.Option(..., "--output", "-o", help="New calibration folder."),
+    method: str = typer.Option("least_squares", "--method", help="least_squares (default), cmaes, or table1 (the paper's iterative algorithm)."),
+    training: Optional[str] = typer.Option(None, "--training", help="Training frames: '20,30,40' or '20:101:10' (default: the paper's protocol)."),
+    contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of GLCV tracking."),
+    force: float = typer.Option(0.25, "--force", help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
+    particles: int = typer.Option(4399, "--particles", help="Tissue particles of the fitted model (the paper: 4,399)."),
+    search_particles: int = typer.Option(1000, "--search-particles", help="Tissue particles of the coarser model the search runs on."),
+    max_evaluations: int = typer.Option(8, "--max-evaluations", help="Least squares: residual evaluations (each with a p-run Jacobian)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Dask worker processes of the local cluster (default: the cores)."),
+    scheduler_address: Optional[str] = typer.Option(None, "--scheduler-address", help="Use an existing Dask cluster (tcp://host:8786)."),
+    resume: Optional[Path] = typer.Option(None, "--resume", help="A search_log.jsonl of an interrupted calibration: its runs are not repeated."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
+) -> None:
+    """Estimate force/Young's modulus, Poisson's ratio, β1, β2 from the training frames (Table 1 and better)."""
+    import shutil
+
+    from hifumotion.console import StageBars
+    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate as run_calibration
+    from hifumotion.estimation.model import ModelSettings
+    from hifumotion.estimation.prepare import prepare
+    from hifumotion.estimation.protocol import parse_frames
+    from hifumotion.estimation.store import save_calibration
+    from hifumotion.experiment.observed import load_observed
+    from hifumotion.io import output_folder
+    from hifumotion.run_info import RunRecord
+
+    if method not in ("least_squares", "cmaes", "table1"):
+        raise InputError(f"expected least_squares, cmaes or table1, got {method!r}", "--method")
+    if resume is not None and not resume.is_file():
+        raise InputError("no such search log", resume)
+    observed = load_observed(observed_dir)
+    frames = parse_frames(training, len(observed.frames), "--training")
+    settings = CalibrationSettings(method=method, training_frames=frames, force_n=force,
+                                   search_particles=search_particles, model=ModelSettings(tissue_particles=particles),
+                                   max_evaluations=max_evaluations,
+                                   workers=workers, scheduler_address=scheduler_address)
+    record = RunRecord("calibrate", config={"observed": str(observed_dir), "method": method, "training": frames,
+                                            "contours": None if contours is None else str(contours), "force_n": force,
+                                            "particles": particles, "search_particles": search_particles,
+                                            "max_evaluations": max_evaluations,
+                                            "workers": workers, "scheduler_address": scheduler_address})
+    with output_folder(output, overwrite) as out:
+        log = out / "search_log.jsonl"
+        if resume is not None:
+            shutil.copyfile(resume, log)
+        with StageBars() as progress:
+            with record.stage("observe"):
+                observation = prepare(observed, contours, progress=progress)
+            with record.stage("calibrate"):
+                cal = run_calibration(observation, settings, log_path=log, progress=progress)
+        with record.stage("write"):
+            summary = save_calibration(cal, out, observed_dir)
+        record.extra["fit"] = {k: summary["fit"][k] for k in ("method", "cost_mm", "runs")}
+        record.write(out)
+    p = summary["parameters"]
+    console.print(f"calibrated on frames {summary['training_frames']} with {summary['fit']['method']} "
+                  f"({summary['fit']['runs']} runs): F/E = {p['force_over_youngs_m2']['value']:.3g} m² "
+                  f"(E = {p['youngs_modulus_pa']['value']:.0f} Pa at {force} N), ν = {p['poisson_ratio']['value']:.3f}, "
+                  f"β1 = {p['beta1_pa_s_pow']['value']:.3g}, β2 = {p['beta2']['value']:.2f}", highlight=False)
+    undetermined = [n for n, v in p.items() if not v["determined"]]
+    if undetermined:
+        console.print(f"not determined by these frames: {', '.join(undetermined)}", highlight=False)
+    console.print(f"calibration in {output.resolve()} (parameters.json)", highlight=False)
+
+
+@app.command()
+def predict(
+    calibration_dir: Path = typer.Argument(..., help="A folder written by hifumotion calibrate."),
+    output: Path = typer.Option(..., "--output", "-o", help="New prediction folder."),
+    frames: Optional[str] = typer.Option(None, "--frames", help="Frames to predict: '110,120' or '110:191:10' (default: training and validation frames of the paper's protocol)."),
+    online: Optional[str] = typer.Option(None, "--online", help="Online mode: horizons in frames, e.g. '4,6,8' — at each frame t predict t + k from the tracked frames up to t (online.csv)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
+) -> None:
+    """Predict the imaging plane's contours with the fitted model: frames/frame_NNNN.png, contours.csv, aim.csv."""
+    import time
+
+    from hifumotion.console import StageBars
+    from hifumotion.estimation.protocol import default_frames, parse_frames
+    from hifumotion.estimation.store import load_calibration
+    import numpy as np
+
+    from hifumotion.io import output_folder, write_json
+    from hifumotion.io.files import write_text
+    from hifumotion.prediction.pipeline import predict_calibrated, write_prediction
+    from hifumotion.run_info import RunRecord
+
+    spec, k, reference, meta = load_calibration(calibration_dir)
+    n = int(meta["frames"])
+    train, valid = default_frames(n)
+    wanted = parse_frames(frames, n, "--frames") or sorted(set(meta["training_frames"]) | set(valid))
+    horizons = parse_frames(online, n, "--online") if online else []
+    now = list(range(min(wanted), max(wanted) - min(horizons) + 1)) if horizons else []
+    online_frames = sorted({t + h for t in now for h in [0, *horizons] if t + h <= max(wanted)})
+    record = RunRecord("predict", config={"calibration": str(calibration_dir), "frames": wanted,
+                                          "parameters": k.as_dict()})
+    with output_folder(output, overwrite) as out:
+        with StageBars() as progress, record.stage("predict"):
+            progress("predict", 0.0)
+            t0 = time.perf_counter()
+            pred = predict_calibrated(spec, k, reference, wanted, online_frames)
+            seconds = time.perf_counter() - t0
+            progress("predict", 1.0)
+        if horizons:
+            with record.stage("online"):
+                from hifumotion.prediction.pipeline import online_csv, online_predictions
+                from hifumotion.scoring import read_frame_masks
+
+                tracked = read_frame_masks(calibration_dir / "observation")
+                observed = np.stack([tracked[f] for f in range(n)])
+                write_text(out / "online.csv", online_csv(
+                    online_predictions(pred, spec, reference, observed, horizons, now), observed, pred.pixel_mm,
+                    spec.frame_interval_s))
+        with record.stage("write"):
+            write_prediction(out, pred, wanted, spec.frame_interval_s)
+            window = (max(wanted) - min(valid)) * spec.frame_interval_s if max(wanted) > min(valid) else None
+            write_json(out / "prediction.json", {
+                "frames": wanted, "parameters": k.as_dict(), "seconds": seconds,
+                "simulated_s": max(wanted) * spec.frame_interval_s,
+                "validation_window_s": window,
+                "realtime_ratio": None if not window else seconds / window,
+            })
+        record.write(out)
+    console.print(f"predicted {len(wanted)} frames in {seconds:.0f} s; masks, contours.csv and aim.csv in "
+                  f"{output.resolve()}", highlight=False)

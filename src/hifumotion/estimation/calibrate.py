@@ -1,0 +1,198 @@
+"""Calibrate the particle model on an observed experiment: one documented order.
+
+1. **Observe** (:func:`~.prepare.prepare`): segment the sweep, reconstruct, track the frames.
+2. **Model** (:func:`~.model.model_spec`): the paper's resolution (4,399 tissue
+   particles) for the final model, and a coarser *search* model (1,000 by default)
+   whose runs are ~10× cheaper.
+3. **Search** on the search model, every batch of runs in parallel on Dask:
+   the best of a small data-free initial design, then bounded least squares
+   (default), CMA-ES, or the paper's Table 1 algorithm.
+4. **Map to the paper's resolution** (output space mapping): one run of the final
+   model at the search optimum; the difference of its residuals from the search
+   model's is taken as fixed, and one Gauss–Newton step with the search model's
+   Jacobian moves the parameters to where the final model fits.
+5. **Uncertainty**: standard errors and identifiability from the Jacobian; the
+   F–E–β1 scaling the push cannot see, run and reported.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Literal
+
+import numpy as np
+
+from hifumotion.estimation import fit as fitting
+from hifumotion.estimation.evaluator import Evaluator
+from hifumotion.estimation.iterative import iterative_estimate
+from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, model_spec
+from hifumotion.estimation.objective import TrainingData, frame_sums_mm
+from hifumotion.estimation.prepare import Observation
+from hifumotion.estimation.protocol import default_frames
+from hifumotion.estimation.space import NAMES, STEPS, SearchSpace
+
+Method = Literal["least_squares", "cmaes", "table1"]
+#: Largest space-mapping move per coordinate, in units of 10 finite-difference steps
+#: (ln E, ln β1 by 0.5: a factor 1.65; ν by 0.1; β2 by 0.5).
+MAX_MAPPING_STEP = 1.0
+
+
+@dataclass
+class CalibrationSettings:
+    """How to calibrate (every field has a default; see :func:`calibrate`)."""
+
+    method: Method = "least_squares"
+    training_frames: list[int] | None = None       # default: the paper's protocol (protocol.default_frames)
+    force_n: float = 0.25                           # nominal force (N): only F/E is determined
+    search_particles: int = 1000                    # tissue particles of the search model
+    model: ModelSettings = field(default_factory=ModelSettings)
+    max_evaluations: int = 8                        # least squares: function evaluations
+    cma_generations: int = 12
+    threshold_mm_per_point: float | None = None     # Table 1's T per contour point (default one pixel)
+    table1_max_runs: int = 120
+    space_mapping: bool = True
+    degeneracy_check: bool = True
+    workers: int | None = None
+    scheduler_address: str | None = None
+    seed: int = 0
+
+
+@dataclass
+class Calibration:
+    """The outcome of :func:`calibrate`."""
+
+    parameters: Parameters
+    std: dict                       # standard error of each fitted coordinate
+    determined: dict                # coordinate -> whether the data determine it
+    training_frames: list[int]
+    search: fitting.FitResult | None
+    table1: object | None
+    mapped: dict                    # the space-mapping step: before/after
+    degeneracy: list
+    correlation: list
+    spec: ModelSpec                 # the final (paper-resolution) model
+    search_spec: ModelSpec
+    observation: Observation
+    runs: int
+    timings_s: dict = field(default_factory=dict)
+
+    def report(self) -> dict:
+        """Values with uncertainties and what is identifiable, as written to ``parameters.json``."""
+        k = self.parameters
+        rel = {n: float(s) for n, s in self.std.items()}
+        e_std = k.youngs_modulus_pa * rel["log_E"]
+        b_std = k.beta1 * rel["log_beta1"]
+        out = {
+            "external_force_n": {"value": k.force_n, "std": None, "determined": False,
+                                 "note": "held at the nominal force: a quasi-static push shows only F/E"},
+            "youngs_modulus_pa": {"value": k.youngs_modulus_pa, "std": e_std, "determined": self.determined["log_E"],
+                                  "note": "at the nominal force; F/E is what the data fix"},
+            "poisson_ratio": {"value": k.poisson_ratio, "std": rel["nu"], "determined": self.determined["nu"]},
+            "beta1_pa_s_pow": {"value": k.beta1, "std": b_std, "determined": self.determined["log_beta1"],
+                               "note": "at the nominal force; β1/E is what the data fix"},
+            "beta2": {"value": k.beta2, "std": rel["beta2"], "determined": self.determined["beta2"]},
+            "force_over_youngs_m2": {"value": k.force_n / k.youngs_modulus_pa,
+                                     "std": k.force_n / k.youngs_modulus_pa * rel["log_E"],
+                                     "determined": self.determined["log_E"]},
+            "beta1_over_youngs_s_pow": {"value": k.beta1 / k.youngs_modulus_pa,
+                                        "std": k.beta1 / k.youngs_modulus_pa * float(np.hypot(rel["log_E"], rel["log_beta1"])),
+                                        "determined": self.determined["log_beta1"]},
+        }
+        for entry in out.values():   # an error no data bound is "unknown", not a number
+            if entry["std"] is not None and not np.isfinite(entry["std"]):
+                entry["std"] = None
+        return out
+
+
+def calibrate(observation: Observation, settings: CalibrationSettings | None = None,
+              log_path: str | Path | None = None, progress: Callable[[str, float], None] | None = None
+              ) -> Calibration:
+    """Steps 2–5 of the module docstring on a prepared observation."""
+    s = settings or CalibrationSettings()
+    tell = progress or (lambda stage, fraction: None)
+    timings: dict[str, float] = {}
+    n_frames = len(observation.frame_masks)
+    frames = s.training_frames or default_frames(n_frames)[0]
+    data = TrainingData.from_masks(observation.frame_masks, frames, observation.frame_plane)
+    space = SearchSpace(force_n=s.force_n)
+
+    t0 = time.perf_counter()
+    final = model_spec(observation, s.model)
+    search_settings = ModelSettings(**{**s.model.__dict__, "tissue_particles": min(s.search_particles,
+                                                                                     s.model.tissue_particles)})
+    search = model_spec(observation, search_settings)
+    timings["model_s"] = time.perf_counter() - t0
+
+    asked = {"n": 0}
+
+    def on_run(done, total):
+        asked["n"] += 1
+        tell("search", min(asked["n"] / _expected_runs(s), 0.99))
+
+    ev = Evaluator(search, data, space, log_path=log_path, scheduler_address=s.scheduler_address,
+                   workers=s.workers, progress=on_run)
+    fit_result = table1 = None
+    mapped: dict = {}
+    degeneracy: list = []
+    with ev.cluster():
+        t1 = time.perf_counter()
+        theta0, design = fitting.initial_guess(ev)
+        if s.method == "least_squares":
+            fit_result = fitting.least_squares_fit(ev, theta0, s.max_evaluations)
+            theta = fit_result.theta
+        elif s.method == "cmaes":
+            fit_result = fitting.cmaes_fit(ev, theta0, s.cma_generations, seed=s.seed)
+            theta = fit_result.theta
+        else:
+            table1 = iterative_estimate(ev, theta0, s.threshold_mm_per_point, s.table1_max_runs)
+            theta = table1.theta
+        timings["search_s"] = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        unc = fitting.uncertainty(ev, theta)
+        j = fitting.jacobian(ev, theta)
+        if s.degeneracy_check:
+            degeneracy = fitting.degeneracy(ev, theta)
+        timings["uncertainty_s"] = time.perf_counter() - t2
+        tell("search", 1.0)
+
+        if s.space_mapping:
+            t3 = time.perf_counter()
+            with ev.sibling(final) as fine_ev:
+                r_fine = fine_ev.one(theta)
+            r_search = ev.one(theta)
+            # only the coordinates the data determine move, by at most MAX_MAPPING_STEP step units:
+            # the search model's Jacobian is a linearisation, not a licence for long jumps
+            free = np.array([unc.determined[n] for n in NAMES])
+            step = np.zeros_like(theta)
+            if free.any():
+                sub, *_ = np.linalg.lstsq(j[:, free], -r_fine.ravel(), rcond=None)
+                step[free] = sub
+            limit = MAX_MAPPING_STEP * STEPS * 10
+            step = np.clip(step, -limit, limit)
+            mapped_theta = np.clip(theta + step, space.lower, space.upper)
+            mapped = {"theta_search": theta.tolist(), "theta_final": mapped_theta.tolist(),
+                      "cost_search_model_mm": float(np.abs(r_search).sum()),
+                      "cost_final_model_before_mm": float(np.abs(r_fine).sum()),
+                      "S_t_final_model_before_mm": frame_sums_mm(r_fine).round(3).tolist()}
+            theta = mapped_theta
+            timings["space_mapping_s"] = time.perf_counter() - t3
+            tell("map", 1.0)
+    std = {n: float(v) for n, v in zip(NAMES, unc.std)}   # inf: not seen by the data
+    return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), fit_result, table1,
+                       mapped, degeneracy, unc.correlation.round(3).tolist(), final, search, observation,
+                       ev.runs, timings)
+
+
+def _expected_runs(s: CalibrationSettings) -> int:
+    """A rough count of search runs, for the progress bar."""
+    p = 4
+    if s.method == "least_squares":
+        return 6 + s.max_evaluations * (p + 1) + 2 * p + 3
+    if s.method == "cmaes":
+        return 6 + s.cma_generations * (4 + int(3 * np.log(p))) + 2 * p + 3
+    return 6 + s.table1_max_runs + 2 * p + 3
+
+
+__all__ = ["CalibrationSettings", "Calibration", "calibrate"]

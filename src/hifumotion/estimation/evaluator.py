@@ -1,0 +1,202 @@
+"""Forward runs for the estimators: in parallel on Dask, cached, logged, resumable.
+
+Every estimator asks :class:`Evaluator` for the residuals of a batch of points θ
+of the search space; the batch runs as parallel Dask tasks (a ``LocalCluster``
+of single-threaded worker processes by default, or an existing cluster at
+``scheduler_address``). Each finished run is appended to a JSON-lines log; a
+calibration started again with the same log reads it back and skips the runs
+already done — the estimators are deterministic, so a resumed search retraces
+its steps from the log and goes on where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from hifumotion.errors import InputError
+from hifumotion.estimation.model import ModelSpec, Parameters, run_model
+from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
+from hifumotion.estimation.space import SearchSpace
+
+
+def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int | None = None,
+                      threads: int | None = 1) -> dict:
+    """One forward run (a Dask task): residuals (mm) of the first ``upto`` training frames.
+
+    ``threads``: Numba threads of the run (1 on a worker: the workers are the parallelism;
+    None leaves the process's setting)."""
+    if threads is not None:
+        import numba
+
+        numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    n = len(data.frames) if upto is None else int(upto)
+    run = run_model(spec, k, int(data.frames[n - 1]))
+    r = residuals_mm(run.points_mm, data, n)
+    return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps}
+
+
+def _key(theta: np.ndarray, upto: int) -> tuple:
+    return (int(upto),) + tuple(round(float(t), 9) for t in theta)
+
+
+class Evaluator:
+    """Residuals ``r(θ)`` (mm) of the training frames, computed on Dask, cached and logged.
+
+    Parameters
+    ----------
+    spec, data, space
+        The forward model, the observed training contours and the search space.
+    log_path
+        JSON-lines file of finished runs (read back on start: resume).
+    scheduler_address
+        An existing Dask scheduler; default a ``LocalCluster`` of ``workers`` processes.
+    progress
+        ``progress(runs_done, runs_asked)``, called as runs finish.
+    """
+
+    def __init__(self, spec: ModelSpec, data: TrainingData, space: SearchSpace, log_path: str | Path | None = None,
+                 scheduler_address: str | None = None, workers: int | None = None,
+                 progress: Callable[[int, int], None] | None = None):
+        self.spec, self.data, self.space = spec, data, space
+        self.log_path = Path(log_path) if log_path is not None else None
+        self.scheduler_address = scheduler_address
+        self.workers = workers or max(1, min(os.cpu_count() or 1, 8))
+        self.progress = progress or (lambda done, asked: None)
+        self.cache: dict[tuple, np.ndarray] = {}
+        self.history: list[dict] = []
+        self.runs = 0
+        self.run_seconds = 0.0
+        self.resumed = 0
+        self._client = None
+        self._cluster = None
+        self._remote = None
+        if self.log_path is not None and self.log_path.is_file():
+            self._read_log()
+
+    # -- log ----------------------------------------------------------------
+    def _read_log(self) -> None:
+        for line in self.log_path.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+                theta = np.asarray(rec["theta"], float)
+                r = np.asarray(rec["residuals_mm"], float)
+                upto = int(rec["upto"])
+            except (ValueError, KeyError, TypeError):
+                continue  # a line cut short by an interruption
+            self.cache[_key(theta, upto)] = r
+            self.history.append(rec)
+            self.resumed += 1
+
+    def _log(self, theta, upto, result) -> None:
+        k = self.space.parameters(theta)
+        rec = {"theta": [float(t) for t in theta], "upto": int(upto), "parameters": k.as_dict(),
+               "S_t_mm": frame_sums_mm(result["residuals_mm"]).round(5).tolist(),
+               "cost_mm": float(np.abs(result["residuals_mm"]).sum()),
+               "seconds": round(float(result["seconds"]), 3), "steps": int(result["steps"]),
+               "residuals_mm": np.round(result["residuals_mm"], 5).tolist()}
+        self.history.append(rec)
+        if self.log_path is not None:
+            with open(self.log_path, "a", encoding="utf-8") as fh:
+                fh.write(json.dumps(rec) + "\n")
+
+    # -- cluster ------------------------------------------------------------
+    @contextmanager
+    def cluster(self):
+        """Start (or connect to) the Dask cluster for the evaluations inside the block."""
+        from dask.distributed import Client, LocalCluster
+
+        if self.scheduler_address:
+            try:
+                self._client = Client(self.scheduler_address, timeout="20s")
+            except OSError as exc:
+                raise InputError(f"cannot reach the Dask scheduler ({exc})", self.scheduler_address) from None
+        else:
+            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                         dashboard_address=None, silence_logs=40)
+            self._client = Client(self._cluster)
+        try:
+            self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
+            yield self
+        finally:
+            self._client.close()
+            if self._cluster is not None:
+                self._cluster.close()
+            self._client = self._cluster = self._remote = None
+
+    @contextmanager
+    def sibling(self, spec: ModelSpec):
+        """An evaluator of another model on the same data and this one's running cluster."""
+        other = Evaluator(spec, self.data, self.space, workers=self.workers)
+        other._client = self._client
+        other._remote = self._client.scatter([spec, self.data], broadcast=True)
+        try:
+            yield other
+        finally:
+            self.runs += other.runs
+            self.run_seconds += other.run_seconds
+            other._client = other._remote = None
+
+    # -- evaluation -----------------------------------------------------------
+    def residuals(self, thetas: Iterable[np.ndarray], upto: int | None = None) -> list[np.ndarray]:
+        """``(n, M)`` residuals (mm) for each θ (runs missing from the cache go to Dask together)."""
+        n = len(self.data.frames) if upto is None else int(upto)
+        thetas = [np.clip(np.asarray(t, float), self.space.lower, self.space.upper) for t in thetas]
+        missing = {}
+        for t in thetas:
+            key = _key(t, n)
+            if key not in self.cache and key not in missing:
+                missing[key] = t
+        if missing:
+            keys = list(missing)
+            results = self._submit([self.space.parameters(missing[k]) for k in keys], n)
+            for key, result in zip(keys, results):
+                self.cache[key] = result["residuals_mm"]
+                self._log(missing[key], n, result)
+        return [self.cache[_key(t, n)] for t in thetas]
+
+    def _submit(self, ks: list[Parameters], n: int) -> list[dict]:
+        """Run the parameter sets on the cluster; results in the order asked."""
+        from dask.distributed import as_completed
+
+        if self._client is None:
+            raise RuntimeError("the Evaluator needs its cluster: use `with evaluator.cluster():`")
+        spec_f, data_f = self._remote
+        futures = {self._client.submit(forward_residuals, spec_f, data_f, k, n, pure=False): i
+                   for i, k in enumerate(ks)}
+        results: list[dict] = [{}] * len(ks)
+        for done, fut in enumerate(as_completed(futures), 1):
+            try:
+                result = fut.result()
+            except InputError:
+                raise
+            except Exception as exc:  # a run that blew up is a bad parameter set, not the end of the fit
+                result = {"residuals_mm": np.full((n, len(self.spec.points_mm)), 10.0), "seconds": 0.0,
+                          "steps": 0, "error": repr(exc)}
+            result["residuals_mm"] = np.asarray(result["residuals_mm"], float)
+            results[futures[fut]] = result
+            self.runs += 1
+            self.run_seconds += float(result["seconds"])
+            self.progress(done, len(ks))
+        return results
+
+    def parameter_runs(self, ks: list[Parameters], upto: int | None = None) -> list[np.ndarray]:
+        """Residuals of parameter sets outside the search space's coordinates (not cached)."""
+        n = len(self.data.frames) if upto is None else int(upto)
+        return [r["residuals_mm"] for r in self._submit(list(ks), n)]
+
+    def one(self, theta: np.ndarray, upto: int | None = None) -> np.ndarray:
+        return self.residuals([theta], upto)[0]
+
+
+def local_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int | None = None) -> np.ndarray:
+    """The residuals of one run in this process (no Dask): for tests and single checks."""
+    return forward_residuals(spec, data, k, upto, threads=None)["residuals_mm"]
+
+
+__all__ = ["Evaluator", "forward_residuals", "local_residuals"]

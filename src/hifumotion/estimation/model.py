@@ -1,0 +1,220 @@
+"""The forward model: the versatile particle framework run with a parameter set K.
+
+:func:`model_spec` turns a prepared observation (:mod:`.prepare`) into a
+:class:`ModelSpec` — plain, picklable data, so a Dask worker can run it:
+
+* the reconstructed tissue filled with particles at the paper's resolution
+  (``tissue_particles``, 4,399 by default: the spacing shrinks until there are that many);
+* the pool and the bar from ``setup.json`` (size, water depth; bar radius, length,
+  direction, tip);
+* the contour points A: points spread evenly along the frame-0 contour, in the
+  imaging plane (tank mm).
+
+:func:`run_model` simulates the scene with a :class:`Parameters` set K — settling
+under gravity, then the push — and returns where the points A have moved at every
+frame (their displacement since frame 0, interpolated from the tissue particles,
+:func:`~hifumotion.particles.section.displacement_at`), and, if asked, the tissue
+particles of chosen frames.
+
+Frame 0 of the model is its settled state. Motion is measured from there, so the
+model's predicted contour of frame t is the *observed* frame-0 shape carried by
+the model's displacement since frame 0 — the resting shape the model settles from
+need not be the unloaded one.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from hifumotion.errors import InputError
+from hifumotion.particles.scene import (BarConfig, ParticleConfig, PhysicsConfig, RunConfig, Scene, TankConfig,
+                                        TissueConfig)
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """The parameter set K of the paper's Table 3 (SI units)."""
+
+    force_n: float = 0.25              # external force held by the bar (N)
+    youngs_modulus_pa: float = 13e3    # E (Pa)
+    poisson_ratio: float = 0.47        # ν
+    beta1: float = 1.0                 # β1 of Eq. 16 (Pa·s^(1+β2))
+    beta2: float = 0.5                 # β2 of Eq. 16
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    def replaced(self, **changes: float) -> "Parameters":
+        return replace(self, **changes)
+
+
+@dataclass
+class ModelSettings:
+    """Numerical settings of the fitted model (not fitted themselves)."""
+
+    tissue_particles: int = 4399        # the paper's count of tissue particles
+    support_factor: float = 2.0         # kernel support h in spacings
+    mass_scaling: float = 2.0e4         # inertia multiplier of the quasi-static push
+    settle_periods: float = 6.0         # settling time in 1/ω of the slowest elastic mode
+    cfl: float = 0.4
+    max_step_s: float = 5e-3
+    force_ramp_s: float = 0.5           # the bar's force rises linearly over this time (s)
+    tissue_density_kg_m3: float = 1050.0
+    rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s)
+    contour_points: int = 64            # size of the point set A
+
+
+@dataclass
+class ModelSpec:
+    """Everything a forward run needs, as plain data (mm, s)."""
+
+    scene: Scene
+    tissue_mm: np.ndarray           # (N, 3) tissue particles in the tank frame
+    tissue_volume_mm3: np.ndarray   # (N,)
+    points_mm: np.ndarray           # (M, 3) the contour points A on the frame-0 contour
+    frame_interval_s: float
+    settings: ModelSettings = field(default_factory=ModelSettings)
+
+    @property
+    def spacing_mm(self) -> float:
+        return self.scene.particles.spacing_mm
+
+
+@dataclass
+class ModelRun:
+    """A forward run: where the points A went, frame by frame."""
+
+    parameters: Parameters
+    frames: np.ndarray              # (F,) frame numbers 0 … last
+    points_mm: np.ndarray           # (F, M, 3) positions of the points A
+    rest_mm: np.ndarray             # (N, 3) the tissue particles at frame 0 (settled)
+    kept: dict                      # frame -> (N, 3) tissue particles of the frames asked for
+    bar_centre_mm: np.ndarray       # (F, 3)
+    steps: int
+    seconds: float
+
+
+def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
+    """The forward model of an :class:`~hifumotion.estimation.prepare.Observation`."""
+    from hifumotion.contour import Contour
+
+    s = settings or ModelSettings()
+    setup = observation.observed.setup
+    rec = observation.reconstruction
+    # the paper's particle count: the lattice misses a little of the surface, so shrink until it is reached
+    # The tissue rests on the pool's floor (y = 0): a segmentation that took in some of the
+    # bright membrane puts particles below it, which the floor's walls would eject.
+    def fill(dx):
+        filled = rec.particles(dx)
+        tissue = filled.positions_mm + observation.offset_mm
+        above = tissue[:, 1] >= 0.5 * dx
+        return tissue[above], filled.volume_mm3[above]
+
+    dx = (rec.volume_mm3 / s.tissue_particles) ** (1 / 3)
+    tissue, volume = fill(dx)
+    while len(tissue) < s.tissue_particles:
+        dx *= 0.99
+        tissue, volume = fill(dx)
+    # on the floor: the lowest layer half a spacing up (a gap would make the tissue fall into the push)
+    tissue[:, 1] -= tissue[:, 1].min() - 0.5 * dx
+    try:
+        tank = TankConfig(size_mm=tuple(setup["tank"]["size_mm"]), water_depth_mm=float(setup["tank"]["water_depth_mm"]))
+        b = setup["bar"]
+        bar = BarConfig(enabled=bool(b.get("enabled", True)), radius_mm=float(b["radius_mm"]),
+                        length_mm=float(b["length_mm"]), direction=tuple(b["direction"]),
+                        tip_mm=_touching_tip(tissue, np.asarray(b["tip_at_rest_mm"], float),
+                                             np.asarray(b["direction"], float), float(b["radius_mm"]), dx),
+                        weight_supported=bool(b.get("weight_supported", True)),
+                        force_n=Parameters().force_n, ramp_s=s.force_ramp_s)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"setup.json: expected tank.size_mm, tank.water_depth_mm and bar.radius_mm, length_mm, "
+                         f"direction, tip_at_rest_mm ({exc})", "setup.json") from None
+    tissue_cfg = TissueConfig(density_kg_m3=s.tissue_density_kg_m3, rate_floor_per_s=s.rate_floor_per_s,
+                              shape="particles", particles_csv="tissue_particles.csv",
+                              centre_mm=tuple(float(c) for c in (tissue.min(0) + tissue.max(0)) / 2))
+    scene = Scene(tank=tank, tissue=tissue_cfg, bar=bar,
+                  particles=ParticleConfig(spacing_mm=dx, support_factor=s.support_factor),
+                  physics=PhysicsConfig(),
+                  run=RunConfig(duration_s=1.0, output_interval_s=observation.observed.frame_interval_s,
+                                mass_scaling=s.mass_scaling, cfl=s.cfl, max_step_s=s.max_step_s, write_vtu=False))
+    contour = Contour.from_mask(observation.frame_masks[0], observation.pixel_mm)
+    closed = np.vstack([contour.points_px, contour.points_px[:1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    at = np.arange(s.contour_points) * arc[-1] / s.contour_points
+    px = np.column_stack([np.interp(at, arc, closed[:, 0]), np.interp(at, arc, closed[:, 1])])
+    points = _plane_points(observation.frame_plane, px)
+    return ModelSpec(scene, tissue, volume, points, observation.observed.frame_interval_s, s)
+
+
+def _touching_tip(tissue_mm: np.ndarray, tip_mm: np.ndarray, direction: np.ndarray, radius_mm: float,
+                  dx_mm: float) -> tuple[float, float, float]:
+    """The bar's tip on its line of action, touching the model's tissue (one spacing, where
+    Eq. 18's contact begins, from the first particle under its end face). The reconstructed
+    surface is not exactly where the real one was: a tip inside it would start the push
+    with a spurious compression, one short of it with a free fall onto the tissue."""
+    axis = direction / np.linalg.norm(direction)
+    rel = tissue_mm - tip_mm
+    along = rel @ axis
+    across = np.linalg.norm(rel - along[:, None] * axis, axis=1)
+    under = across <= radius_mm
+    if not under.any():
+        return tuple(float(c) for c in tip_mm)
+    return tuple(float(c) for c in tip_mm + (along[under].min() - dx_mm) * axis)
+
+
+def _plane_points(plane, xy_px: np.ndarray) -> np.ndarray:
+    """Tank positions (mm) of in-plane pixel coordinates ``(x = col, y = row)``."""
+    o = np.asarray(plane.origin_mm, float)
+    return (o + xy_px[:, :1] * plane.pixel_mm * np.asarray(plane.u, float)
+            + xy_px[:, 1:2] * plane.pixel_mm * np.asarray(plane.v, float))
+
+
+def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
+    """The spec's scene with the parameter set ``k``, run to frame ``last_frame``."""
+    s = spec.settings
+    height_m = float(np.ptp(spec.tissue_mm[:, 1]) + spec.spacing_mm) * 1e-3
+    # slowest elastic mode: a quarter shear wave over the height, slowed by the mass scaling
+    omega = 0.5 * math.pi * math.sqrt(k.youngs_modulus_pa / s.tissue_density_kg_m3) / height_m
+    omega /= math.sqrt(s.mass_scaling)
+    scene = spec.scene.model_copy(deep=True)
+    scene.tissue.youngs_modulus_pa = k.youngs_modulus_pa
+    scene.tissue.poisson_ratio = k.poisson_ratio
+    scene.tissue.beta1 = k.beta1
+    scene.tissue.beta2 = k.beta2
+    scene.bar.force_n = k.force_n
+    scene.run.duration_s = max(last_frame, 1) * spec.frame_interval_s
+    scene.run.settle_s = s.settle_periods / omega
+    scene.run.settle_damping_per_s = 2.0 * omega
+    return scene
+
+
+def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -> ModelRun:
+    """Simulate frames 0 … ``last_frame`` with ``k``; the points A at every frame.
+
+    ``keep_frames``: frames whose tissue particles are returned as well (for masks).
+    Raises :class:`~hifumotion.errors.InputError` for parameters outside the model's
+    validity (ν ≥ 0.5, E ≤ 0 …).
+    """
+    from hifumotion.particles.section import displacement_at
+    from hifumotion.particles.simulate import simulate
+
+    if not (k.youngs_modulus_pa > 0 and -1 < k.poisson_ratio < 0.5 and k.beta1 >= 0):
+        raise InputError(f"parameters outside the model's range: {k}", "parameters")
+    t0 = time.perf_counter()
+    scene = scene_for(spec, k, last_frame)
+    sim = simulate(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3))
+    rest = sim.tissue_mm[0]
+    frames = np.arange(len(sim.times_s))
+    points = np.empty((len(frames), len(spec.points_mm), 3))
+    for f in frames:
+        u, covered = displacement_at(spec.points_mm, sim.tissue_mm[f], rest, spec.spacing_mm)
+        points[f] = spec.points_mm + u
+    kept = {int(f): sim.tissue_mm[f].copy() for f in keep_frames if 0 <= f < len(frames)}
+    return ModelRun(k, frames, points, rest, kept, sim.bar_centre_mm, sim.steps, time.perf_counter() - t0)
+
+
+__all__ = ["Parameters", "ModelSettings", "ModelSpec", "ModelRun", "model_spec", "scene_for", "run_model"]

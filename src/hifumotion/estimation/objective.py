@@ -1,0 +1,97 @@
+"""The estimation objective: how far the model's contour points are from the observed contours.
+
+The paper (Section 2.2.2) compares the displacement D̂_t the model gives the
+contour points A with the observed one D_t and sums ``S_t = Σ_{a∈A} |D̂_t(a) − D_t(a)|``.
+A contour only shows where the boundary is, not which material point sits where
+along it, so the observed D_t(a) is known only across the boundary. Here the
+difference for point a is therefore the **signed distance (mm) of the model's
+point a at frame t to the observed contour of frame t** — the normal component of
+D̂_t(a) − D_t(a), exact for small steps (see ``docs/decisions.md``).
+
+The observed contours enter as signed distance maps (px, positive inside),
+sampled bilinearly at the model's points projected into the imaging plane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from hifumotion.errors import InputError
+from hifumotion.particles.section import Plane
+
+
+def signed_distance_px(mask: np.ndarray) -> np.ndarray:
+    """Signed distance (px, positive inside) to the 0.5 iso-line of a mask."""
+    m = np.asarray(mask, bool)
+    inside = ndimage.distance_transform_edt(m)
+    outside = ndimage.distance_transform_edt(~m)
+    return np.where(m, inside - 0.5, -(outside - 0.5))
+
+
+@dataclass
+class TrainingData:
+    """The observed contours the model is fitted to.
+
+    Attributes
+    ----------
+    frames
+        Training frame numbers (the paper's protocol: 20, 30, …, 100).
+    distance_px
+        ``(n, H, W)`` signed distance maps (px) of the observed masks of those frames.
+    plane
+        The imaging plane (tank frame).
+    """
+
+    frames: np.ndarray
+    distance_px: np.ndarray
+    plane: Plane
+
+    @classmethod
+    def from_masks(cls, masks: np.ndarray, frames, plane: Plane) -> "TrainingData":
+        frames = np.asarray(sorted(int(f) for f in frames))
+        if len(frames) == 0:
+            raise InputError("no training frames", "training_frames")
+        if frames[0] <= 0 or frames[-1] >= len(masks):
+            raise InputError(f"training frames must lie in 1 … {len(masks) - 1}, got {frames.tolist()}",
+                             "training_frames")
+        empty = [int(f) for f in frames if not masks[f].any()]
+        if empty:
+            raise InputError(f"no target in training frames {empty}", "training_frames")
+        return cls(frames, np.stack([signed_distance_px(masks[f]) for f in frames]), plane)
+
+    @property
+    def last_frame(self) -> int:
+        return int(self.frames[-1])
+
+    @property
+    def pixel_mm(self) -> float:
+        return float(self.plane.pixel_mm)
+
+
+def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = None) -> np.ndarray:
+    """``(n, M)`` signed distances (mm) of the model's points to the observed contours.
+
+    ``points_mm`` is a run's ``(F, M, 3)`` point positions indexed by frame number;
+    row i belongs to training frame ``data.frames[i]``; ``upto`` keeps the first
+    ``upto`` training frames. Positive: the model's point lies inside the observed contour.
+    """
+    n = len(data.frames) if upto is None else int(upto)
+    out = np.empty((n, points_mm.shape[1]))
+    for i in range(n):
+        f = int(data.frames[i])
+        if f >= len(points_mm):
+            raise InputError(f"the run ended before training frame {f}", "run")
+        xy = data.plane.to_pixels(points_mm[f])
+        out[i] = ndimage.map_coordinates(data.distance_px[i], [xy[:, 1], xy[:, 0]], order=1, mode="nearest")
+    return out * data.pixel_mm
+
+
+def frame_sums_mm(residuals: np.ndarray) -> np.ndarray:
+    """S_t = Σ_{a∈A} |D̂_t(a) − D_t(a)| (mm) per training frame."""
+    return np.abs(residuals).sum(axis=1)
+
+
+__all__ = ["TrainingData", "residuals_mm", "frame_sums_mm", "signed_distance_px"]

@@ -1,0 +1,192 @@
+"""Step 1 of the estimation: from an observed experiment to what the model is fitted to.
+
+Only the observer's data is read (``observed/``, :func:`~hifumotion.experiment.load_observed`):
+
+1. the spatial sweep is segmented with GLCV from the clinician's contour
+   (:func:`~hifumotion.segmentation.sweep.segment_sweep`), starting in the sweep plane
+   nearest the imaging plane (the contour was clicked there, on the resting tissue);
+2. the masks are reconstructed into the 3D tissue (:func:`~hifumotion.reconstruction.reconstruct`)
+   and placed in the tank frame from the image geometry of ``setup.json``;
+3. the time series is tracked with GLCV from the same contour
+   (:func:`~hifumotion.segmentation.track`); where the user gives contours of their own
+   (a CSV; the paper used a physician's), those replace the tracked ones.
+
+Coordinates: the reconstruction is in image mm (x = column × pixel, y = row ×
+pixel, z = the plane's position); the tank frame adds ``offset_mm``
+(``setup.json``: ``imaging.row0_col0_mm``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from hifumotion.errors import InputError
+from hifumotion.experiment.observed import Observed
+from hifumotion.particles.section import Plane
+from hifumotion.reconstruction import Reconstruction, reconstruct
+from hifumotion.segmentation.sweep import SweepSegmentation, segment_sweep
+
+Progress = Callable[[str, float], None]
+
+
+@dataclass
+class Observation:
+    """An observed experiment made ready for fitting.
+
+    Attributes
+    ----------
+    observed
+        The raw data (images, geometry, the clinician's contour).
+    sweep
+        The sweep's masks (GLCV).
+    reconstruction
+        The resting tissue in 3D (image mm; add ``offset_mm`` for the tank frame).
+    offset_mm
+        ``(3,)`` tank position of the image origin (mm).
+    frame_masks
+        ``(T, H, W)`` bool: the target in every frame (tracked, or the user's where given).
+    contour_source
+        ``"glcv"`` or the path of the user's contour file.
+    timings_s
+        Wall time of each step (s).
+    """
+
+    observed: Observed
+    sweep: SweepSegmentation
+    reconstruction: Reconstruction
+    offset_mm: np.ndarray
+    frame_masks: np.ndarray
+    contour_source: str
+    timings_s: dict = field(default_factory=dict)
+
+    @property
+    def pixel_mm(self) -> float:
+        return self.observed.pixel_mm
+
+    @property
+    def frame_plane(self) -> Plane:
+        """The time series' imaging plane in the tank frame."""
+        return _plane_at(self.offset_mm, self.observed, self.observed.setup["imaging"]["frames_plane_z_mm"])
+
+    def inside_tank(self, points_mm: np.ndarray) -> np.ndarray:
+        """Signed distance (mm, positive inside) of tank points to the reconstructed resting tissue."""
+        return self.reconstruction.inside(np.asarray(points_mm, float) - self.offset_mm)
+
+
+def _plane_geometry(observed: Observed) -> tuple[np.ndarray, float]:
+    im = observed.setup.get("imaging", {})
+    try:
+        x0, y0 = (float(v) for v in im["row0_col0_mm"])
+        z_frames = float(im["frames_plane_z_mm"])
+    except (KeyError, TypeError, ValueError):
+        raise InputError("setup.json: expected imaging.row0_col0_mm [x, y] and imaging.frames_plane_z_mm",
+                         "setup.json") from None
+    col = np.asarray(im.get("column_axis", (1.0, 0.0, 0.0)), float)
+    row = np.asarray(im.get("row_axis", (0.0, 1.0, 0.0)), float)
+    if not (np.allclose(col, [1, 0, 0]) and np.allclose(row, [0, 1, 0])):
+        raise InputError("setup.json: only planes with columns along x and rows along y (z = plane position) "
+                         "are supported", "imaging.column_axis")
+    return np.array([x0, y0, 0.0]), z_frames
+
+
+#: Margin (mm) around the resting bar whose pixels cannot be tissue (the bar's blur in the image).
+BAR_MARGIN_MM = 0.5
+
+
+def known_solids(plane: Plane, setup: dict, bar: bool = True) -> np.ndarray:
+    """Pixels of ``plane`` that cannot be the tissue: below the pool's floor (tank y < 0), and,
+    with ``bar``, inside the resting bar grown by :data:`BAR_MARGIN_MM` (``setup.json``)."""
+    pts = plane.points_mm()
+    out = pts[..., 1] < 0.0
+    b = setup.get("bar", {})
+    if bar and b.get("enabled", False):
+        try:
+            axis = np.asarray(b["direction"], float)
+            axis = axis / np.linalg.norm(axis)
+            d = pts - np.asarray(b["tip_at_rest_mm"], float)
+            radius, length = float(b["radius_mm"]), float(b["length_mm"])
+        except (KeyError, TypeError, ValueError):
+            raise InputError("setup.json: expected bar.direction, tip_at_rest_mm, radius_mm, length_mm",
+                             "setup.json") from None
+        along = d @ axis
+        radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
+        out |= (along <= BAR_MARGIN_MM) & (along >= -length - BAR_MARGIN_MM) & (radial <= radius + BAR_MARGIN_MM)
+    return out
+
+
+def _plane_at(observation_offset: np.ndarray, observed: Observed, z_mm: float) -> Plane:
+    im = observed.setup["imaging"]
+    return Plane((float(observation_offset[0]), float(observation_offset[1]), float(z_mm)),
+                 tuple(im.get("column_axis", (1.0, 0.0, 0.0))), tuple(im.get("row_axis", (0.0, 1.0, 0.0))),
+                 tuple(observed.frames.shape[1:]), observed.pixel_mm)
+
+
+def read_user_contours(path: str | Path, observed: Observed) -> dict[int, np.ndarray]:
+    """Masks of the frames a user's contour CSV (``frame, x_px, y_px`` or ``x_mm, y_mm``) outlines."""
+    from hifumotion.io.writers import read_contours_csv
+
+    masks = {}
+    shape = observed.frames.shape[1:]
+    for label, contour in read_contours_csv(path, spacing_mm=observed.pixel_mm).items():
+        try:
+            frame = int(float(label))
+        except ValueError:
+            raise InputError(f"frame label {label!r} is not a frame number", path) from None
+        if not 0 <= frame < len(observed.frames):
+            raise InputError(f"frame {frame} is outside the {len(observed.frames)} observed frames", path)
+        masks[frame] = contour.to_mask(shape)
+    return masks
+
+
+def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
+            progress: Progress | None = None) -> Observation:
+    """Segment, reconstruct and track an observed experiment (module docstring)."""
+    from hifumotion.segmentation import track
+
+    tell = progress or (lambda stage, fraction: None)
+    timings: dict[str, float] = {}
+    offset, z_frames = _plane_geometry(observed)
+    px = observed.pixel_mm
+    init = observed.initial_contour
+
+    t0 = time.perf_counter()
+    start = int(np.argmin(np.abs(observed.sweep_z_mm - z_frames)))
+    # what the operator knows cannot be tissue: the floor, and the bar where it rests
+    exclude = np.stack([known_solids(_plane_at(offset, observed, z), observed.setup) for z in observed.sweep_z_mm])
+    sweep = segment_sweep(observed.sweep, init, start, method, spacing=px, exclude=exclude)
+    tell("segment sweep", 1.0)
+    timings["segment_sweep_s"] = time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    if sweep.present.sum() < 2:
+        raise InputError("the sweep's segmentation holds the tissue in fewer than two planes; "
+                         "check the initial contour", "sweep")
+    rec = reconstruct(sweep.masks, px, observed.sweep_z_mm)
+    tell("reconstruct", 1.0)
+    timings["reconstruct_s"] = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    given = read_user_contours(contours_csv, observed) if contours_csv is not None else {}
+    if observed.initial_frame != 0:
+        raise InputError("the initial contour must be on frame 0 to track the series", "initial_contour.csv")
+    # every frame is tracked (the online mode needs them all); the user's contours replace
+    # the tracked ones where given
+    # the floor, and the bar's place at rest: pushing along its axis it only moves away from
+    # there, into the tissue, so no frame has tissue where the resting bar was
+    frame_plane = _plane_at(offset, observed, z_frames)
+    masks = track(observed.frames, init, method, spacing=px,
+                  exclude=known_solids(frame_plane, observed.setup)).masks
+    for frame, m in given.items():
+        masks[frame] = m
+    source = str(contours_csv) if given else method
+    tell("track frames", 1.0)
+    timings["track_s"] = time.perf_counter() - t2
+    return Observation(observed, sweep, rec, offset, masks, source, timings)
+
+
+__all__ = ["Observation", "prepare", "read_user_contours"]

@@ -1,0 +1,43 @@
+"""Which frames train the model and which validate it.
+
+The paper (Section 3.2) has ground truth every 10th step from the 20th: frames
+20, 30, …, 100 train, 110, …, 190 validate — on a series of 200 frames. A series
+of another length gets the same fractions of its length: training at 10 %,
+15 %, …, 50 % of it, validation at 55 %, …, 95 % (exactly the paper's frames for 200).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hifumotion.errors import InputError
+
+
+def default_frames(n_frames: int) -> tuple[list[int], list[int]]:
+    """The paper's training and validation frames, scaled to ``n_frames``."""
+    if n_frames < 20:
+        raise InputError(f"a series of {n_frames} frames is too short for the paper's protocol (≥ 20)", "frames")
+    train = sorted({int(round(n_frames * f)) for f in np.arange(0.10, 0.501, 0.05)})
+    valid = sorted({int(round(n_frames * f)) for f in np.arange(0.55, 0.951, 0.05)})
+    return train, [v for v in valid if v < n_frames]
+
+
+def parse_frames(text: str | None, n_frames: int, what: str) -> list[int] | None:
+    """``"20,30,40"`` or ``"20:101:10"`` (start:stop:step) → frame numbers; None passes through."""
+    if text is None:
+        return None
+    try:
+        if ":" in text:
+            parts = [int(p) for p in text.split(":")]
+            frames = list(range(*parts))
+        else:
+            frames = [int(p) for p in text.split(",") if p.strip()]
+    except ValueError:
+        raise InputError(f"expected frame numbers like '20,30,40' or '20:101:10', got {text!r}", what) from None
+    bad = [f for f in frames if not 0 < f < n_frames]
+    if not frames or bad:
+        raise InputError(f"frames must lie in 1 … {n_frames - 1}; got {frames}", what)
+    return sorted(set(frames))
+
+
+__all__ = ["default_frames", "parse_frames"]

@@ -1,0 +1,69 @@
+"""The search space of the estimation: which parameters are fitted, in which coordinates.
+
+A quasi-static push is (to first order) unchanged when the force, Young's modulus
+and the viscosity β1 are scaled together: only F/E and β1/E show in the
+displacement (gravity's small share breaks the symmetry only weakly). So the
+fit holds the force at a nominal value ``force_n`` (the operator's estimate; the
+paper's 0.25 N by default) and fits
+
+=============  ==================  ===========================
+coordinate     parameter           default bounds
+=============  ==================  ===========================
+``log_E``      ln E (Pa)           E in 1 kPa … 300 kPa
+``nu``         ν                   0.30 … 0.495
+``log_beta1``  ln β1 (Pa·s^1+β2)   β1 in 10² … 10⁸
+``beta2``      β2                  0.1 … 1.0
+=============  ==================  ===========================
+
+The reported E and β1 are then "at the nominal force": what the data determine are
+F/E and β1/E, and :func:`~hifumotion.estimation.fit.degeneracy` shows it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hifumotion.estimation.model import Parameters
+
+NAMES = ("log_E", "nu", "log_beta1", "beta2")
+#: Finite-difference steps of the Jacobian in each coordinate (5 % of E and β1).
+STEPS = np.array([0.05, 0.01, 0.05, 0.05])
+
+
+@dataclass(frozen=True)
+class SearchSpace:
+    force_n: float = 0.25
+    youngs_pa: tuple[float, float] = (1e3, 3e5)
+    poisson: tuple[float, float] = (0.30, 0.495)
+    beta1: tuple[float, float] = (1e2, 1e8)
+    beta2: tuple[float, float] = (0.1, 1.0)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([np.log(self.youngs_pa[0]), self.poisson[0], np.log(self.beta1[0]), self.beta2[0]])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([np.log(self.youngs_pa[1]), self.poisson[1], np.log(self.beta1[1]), self.beta2[1]])
+
+    def parameters(self, theta) -> Parameters:
+        t = np.clip(np.asarray(theta, float), self.lower, self.upper)
+        return Parameters(force_n=self.force_n, youngs_modulus_pa=float(np.exp(t[0])), poisson_ratio=float(t[1]),
+                          beta1=float(np.exp(t[2])), beta2=float(t[3]))
+
+    def theta(self, k: Parameters) -> np.ndarray:
+        return np.array([np.log(k.youngs_modulus_pa), k.poisson_ratio, np.log(k.beta1), k.beta2])
+
+    def initial_design(self) -> list[np.ndarray]:
+        """A small spread of starts (E × β1 at mid ν, β2), data-free: the best one seeds the search."""
+        lo, hi = self.lower, self.upper
+        out = []
+        for fe in (0.25, 0.5, 0.75):
+            for fb in (0.35, 0.65):
+                out.append(np.array([lo[0] + fe * (hi[0] - lo[0]), 0.45, lo[2] + fb * (hi[2] - lo[2]), 0.5]))
+        return out
+
+
+__all__ = ["SearchSpace", "NAMES", "STEPS"]

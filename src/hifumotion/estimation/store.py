@@ -1,0 +1,144 @@
+"""A calibration folder: what ``hifumotion calibrate`` writes and ``hifumotion predict`` reads.
+
+::
+
+    parameters.json           values, uncertainties, identifiability, fit summary, settings
+    search_log.jsonl          every forward run of the search (resumable)
+    model/scene.toml          the fitted model at the paper's resolution (``hifumotion simulate`` runs it)
+    model/tissue_particles.csv
+    model/contour_points.csv  the contour points A (tank mm)
+    observation/reference.npz the frame-0 shape: in-plane mask and the reconstruction's distance grid
+    observation/frames/       the tracked (or given) masks of every frame, 0/255 PNG
+    observation/sweep/        the sweep's masks
+    observation/tissue.stl|ply|vtp, tissue_volume.nii.gz   the reconstruction (ParaView, 3D Slicer)
+    run_info.json
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from hifumotion.errors import InputError
+from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters
+from hifumotion.particles.section import Plane
+from hifumotion.prediction.physics import ReferenceShape
+
+
+def _csv(path: Path, header: str, rows: np.ndarray) -> None:
+    from hifumotion.io.files import write_text
+
+    body = "\n".join(",".join(f"{v:.6f}" for v in r) for r in rows)
+    write_text(path, header + "\n" + body + "\n")
+
+
+def save_calibration(cal, folder: str | Path, observed_dir: str | Path, extra: dict | None = None) -> dict:
+    """Write a :class:`~hifumotion.estimation.calibrate.Calibration` into ``folder``."""
+    from hifumotion.config import dump_toml
+    from hifumotion.io import write_json
+    from hifumotion.io.files import atomic_path
+    from hifumotion.io.writers import write_png_stack
+
+    folder = Path(folder)
+    for d in ("model", "observation/frames", "observation/sweep"):
+        (folder / d).mkdir(parents=True, exist_ok=True)
+    obs = cal.observation
+    spec = cal.spec
+    scene = spec.scene.model_copy(deep=True)
+    k = cal.parameters
+    scene.tissue.youngs_modulus_pa, scene.tissue.poisson_ratio = k.youngs_modulus_pa, k.poisson_ratio
+    scene.tissue.beta1, scene.tissue.beta2, scene.bar.force_n = k.beta1, k.beta2, k.force_n
+    scene.tissue.particles_csv = Path("tissue_particles.csv")
+    from hifumotion.io.files import write_text
+
+    write_text(folder / "model" / "scene.toml", dump_toml(scene))
+    _csv(folder / "model" / "tissue_particles.csv", "x_mm,y_mm,z_mm,volume_mm3",
+         np.column_stack([spec.tissue_mm, spec.tissue_volume_mm3]))
+    _csv(folder / "model" / "contour_points.csv", "x_mm,y_mm,z_mm", spec.points_mm)
+    rec = obs.reconstruction
+    plane = obs.frame_plane
+    with atomic_path(folder / "observation" / "reference.npz") as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, frame0_mask=obs.frame_masks[0], rec_distance_mm=rec.distance_mm.astype(np.float32),
+                                rec_voxel_mm=rec.voxel_mm,
+                                rec_origin_mm=np.asarray(rec.origin_mm) + obs.offset_mm,
+                                plane_origin_mm=np.asarray(plane.origin_mm), plane_u=np.asarray(plane.u),
+                                plane_v=np.asarray(plane.v), plane_shape=np.asarray(plane.shape),
+                                pixel_mm=plane.pixel_mm)
+    write_png_stack(folder / "observation" / "frames", obs.frame_masks, prefix="frame_", digits=4)
+    write_png_stack(folder / "observation" / "sweep", obs.sweep.masks, prefix="slice_", digits=3)
+    rec.write(folder / "observation")
+    summary = {
+        "description": "Parameters fitted by hifumotion calibrate (SI). 'determined' says whether the training "
+                       "frames fix the value; E and β1 are at the nominal force (only F/E and β1/E are seen).",
+        "observed": str(Path(observed_dir).resolve()),
+        "parameters": cal.report(),
+        "training_frames": cal.training_frames,
+        "frame_interval_s": spec.frame_interval_s,
+        "frames": int(len(obs.frame_masks)),
+        "model_settings": asdict(spec.settings),
+        "model": {"tissue_particles": int(len(spec.tissue_mm)), "spacing_mm": spec.spacing_mm,
+                  "search_tissue_particles": int(len(cal.search_spec.tissue_mm)),
+                  "search_spacing_mm": cal.search_spec.spacing_mm},
+        "fit": {
+            "method": cal.search.method if cal.search is not None else "table1",
+            "cost_mm": cal.search.cost_mm if cal.search is not None else float(cal.table1.frame_sums_mm.sum()),
+            "S_t_mm": (np.abs(cal.search.residuals_mm).sum(1).round(3).tolist() if cal.search is not None
+                       else cal.table1.frame_sums_mm.round(3).tolist()),
+            "iterations": cal.search.iterations if cal.search is not None else None,
+            "message": cal.search.message if cal.search is not None else None,
+            "table1": None if cal.table1 is None else {
+                "accepted": cal.table1.accepted, "threshold_mm": cal.table1.threshold_mm,
+                "runs": cal.table1.runs, "events": cal.table1.events},
+            "space_mapping": cal.mapped,
+            "degeneracy": cal.degeneracy,
+            "correlation": {"coordinates": ["log_E", "nu", "log_beta1", "beta2"], "matrix": cal.correlation},
+            "runs": cal.runs,
+        },
+        "observation": {"contours": obs.contour_source, "sweep_planes_with_tissue": int(obs.sweep.present.sum()),
+                        "reconstructed_volume_mm3": rec.volume_mm3, "notes": obs.sweep.notes + rec.notes},
+        "timings_s": {**obs.timings_s, **cal.timings_s},
+        **(extra or {}),
+    }
+    write_json(folder / "parameters.json", summary)
+    return summary
+
+
+def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, ReferenceShape, dict]:
+    """The fitted model, its parameters, the frame-0 reference shape and ``parameters.json``."""
+    from hifumotion.particles.scene import load_scene, read_particles_csv
+
+    folder = Path(folder)
+    pj = folder / "parameters.json"
+    if not pj.is_file():
+        raise InputError("not a calibration folder (no parameters.json; run hifumotion calibrate)", folder)
+    try:
+        meta = json.loads(pj.read_text())
+        p = meta["parameters"]
+        k = Parameters(force_n=p["external_force_n"]["value"], youngs_modulus_pa=p["youngs_modulus_pa"]["value"],
+                       poisson_ratio=p["poisson_ratio"]["value"], beta1=p["beta1_pa_s_pow"]["value"],
+                       beta2=p["beta2"]["value"])
+        settings = ModelSettings(**meta["model_settings"])
+        interval = float(meta["frame_interval_s"])
+    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
+        raise InputError(f"malformed calibration ({exc})", pj) from None
+    scene = load_scene(folder / "model" / "scene.toml")
+    tissue, volume = read_particles_csv(folder / "model" / "tissue_particles.csv")
+    points, _ = read_particles_csv(folder / "model" / "contour_points.csv")
+    spec = ModelSpec(scene, tissue, volume if volume is not None else np.full(len(tissue), scene.particles.spacing_mm ** 3),
+                     points, interval, settings)
+    ref_path = folder / "observation" / "reference.npz"
+    if not ref_path.is_file():
+        raise InputError("no such file", ref_path)
+    z = np.load(ref_path)
+    plane = Plane(tuple(z["plane_origin_mm"].tolist()), tuple(z["plane_u"].tolist()), tuple(z["plane_v"].tolist()),
+                  tuple(int(v) for v in z["plane_shape"]), float(z["pixel_mm"]))
+    ref = ReferenceShape(z["frame0_mask"].astype(bool), plane, z["rec_distance_mm"].astype(float),
+                         float(z["rec_voxel_mm"]), tuple(z["rec_origin_mm"].tolist()))
+    return spec, k, ref, meta
+
+
+__all__ = ["save_calibration", "load_calibration"]

@@ -1,0 +1,120 @@
+"""Predict the imaging plane's contours with the calibrated particle model.
+
+The predicted section of frame t is the observed frame-0 shape carried by the
+model's displacement since frame 0: a pixel q is inside when its material point
+``X = q − u_t(q)`` is inside the reference shape (see
+:func:`~hifumotion.particles.section.displacement_at`). The reference shape
+(:class:`ReferenceShape`) is the frame-0 contour in the imaging plane, continued
+out of the plane by the reconstructed tissue, so a tissue that moves across the
+plane brings its neighbouring section into view:
+
+    d(X) = d₀(X_plane) + [d_rec(X) − d_rec(X projected onto the plane)]   (mm, > 0 inside)
+
+with d₀ the signed distance to the frame-0 contour and d_rec the reconstruction's.
+
+The aim point is a material point — by default the frame-0 centroid — carried by
+the same displacement: where the focus should go in each frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from hifumotion.estimation.model import ModelRun, ModelSpec, Parameters, run_model
+from hifumotion.estimation.objective import signed_distance_px
+from hifumotion.particles.section import Plane, displacement_at
+
+
+@dataclass
+class ReferenceShape:
+    """The tissue at frame 0 as a signed distance (mm, positive inside) in the tank frame.
+
+    Attributes
+    ----------
+    frame0_mask
+        The target in the imaging plane at frame 0 (observed grid).
+    plane
+        The imaging plane.
+    rec_distance_mm, rec_voxel_mm, rec_origin_mm
+        The reconstruction's signed distance grid ``(Z, Y, X)`` in the tank frame
+        (``None``: the in-plane shape only).
+    """
+
+    frame0_mask: np.ndarray
+    plane: Plane
+    rec_distance_mm: np.ndarray | None = None
+    rec_voxel_mm: float = 1.0
+    rec_origin_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        self._d0 = signed_distance_px(self.frame0_mask) * self.plane.pixel_mm
+
+    def _rec(self, p: np.ndarray) -> np.ndarray:
+        idx = (p[:, ::-1] - np.asarray(self.rec_origin_mm)[::-1]) / self.rec_voxel_mm
+        return ndimage.map_coordinates(self.rec_distance_mm, idx.T, order=1, mode="nearest")
+
+    def distance(self, points_mm: np.ndarray) -> np.ndarray:
+        p = np.asarray(points_mm, float).reshape(-1, 3)
+        xy = self.plane.to_pixels(p)
+        d = ndimage.map_coordinates(self._d0, [xy[:, 1], xy[:, 0]], order=1, mode="nearest")
+        if self.rec_distance_mm is not None:
+            normal = np.cross(np.asarray(self.plane.u, float), np.asarray(self.plane.v, float))
+            off = (p - np.asarray(self.plane.origin_mm, float)) @ normal
+            d = d + self._rec(p) - self._rec(p - off[:, None] * normal)
+        return d
+
+    def inside(self, points_mm: np.ndarray) -> np.ndarray:
+        return self.distance(points_mm) > 0
+
+
+def predicted_mask(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float,
+                   reference: ReferenceShape) -> np.ndarray:
+    """The predicted target mask on the imaging plane's grid (module docstring)."""
+    plane = reference.plane
+    q = plane.points_mm().reshape(-1, 3)
+    u, covered = displacement_at(q, positions_mm, rest_mm, spacing_mm)
+    mask = np.zeros(len(q), bool)
+    mask[covered] = reference.inside(q[covered] - u[covered])
+    return mask.reshape(plane.shape)
+
+
+@dataclass
+class Prediction:
+    """Predicted masks of the frames asked for, and the aim point in every frame."""
+
+    masks: dict                 # frame -> bool (H, W)
+    aim_mm: np.ndarray          # (F, 2) in-plane position (mm, image axes) of the aim point, frames 0 … last
+    aim_plan_mm: np.ndarray     # (2,) the aim point at frame 0 (the plan)
+    run: ModelRun
+    pixel_mm: float
+
+
+def aim_point_px(mask: np.ndarray) -> np.ndarray:
+    """The frame-0 centroid ``(x = col, y = row)`` in px: the default planned focus."""
+    rows, cols = np.nonzero(mask)
+    return np.array([cols.mean(), rows.mean()])
+
+
+def predict_frames(spec: ModelSpec, k: Parameters, reference: ReferenceShape, frames, last_frame: int | None = None,
+                   aim_px: np.ndarray | None = None) -> Prediction:
+    """Run the model with ``k`` to the last frame asked for and predict the masks and aim."""
+    from dataclasses import replace
+
+    frames = sorted(int(f) for f in frames)
+    last = int(last_frame if last_frame is not None else frames[-1])
+    plane = reference.plane
+    aim0 = aim_point_px(reference.frame0_mask) if aim_px is None else np.asarray(aim_px, float)
+    o = np.asarray(plane.origin_mm, float)
+    point = o + aim0[0] * plane.pixel_mm * np.asarray(plane.u) + aim0[1] * plane.pixel_mm * np.asarray(plane.v)
+    # the aim point rides along as one more tracked material point
+    run = run_model(replace(spec, points_mm=np.vstack([spec.points_mm, point])), k, last, keep_frames=frames)
+    masks = {f: predicted_mask(run.kept[f], run.rest_mm, spec.spacing_mm, reference) for f in frames if f in run.kept}
+    aim = plane.to_pixels(run.points_mm[:, -1]) * plane.pixel_mm
+    run.points_mm = run.points_mm[:, :-1]
+    return Prediction(masks, aim, aim0 * plane.pixel_mm, run, float(plane.pixel_mm))
+
+
+__all__ = ["ReferenceShape", "predicted_mask", "Prediction", "aim_point_px", "predict_frames"]

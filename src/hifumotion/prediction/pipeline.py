@@ -1,0 +1,123 @@
+"""From a calibration folder to predicted frames, aim points and the online mode.
+
+:func:`predict_calibrated` runs the fitted model (paper resolution) to the last
+frame asked for and returns the masks of the training and validation frames and
+the aim point of every frame. :func:`online_predictions` is the clinic's mode:
+at frame t, knowing the frames up to t, predict frame t + k; the cheap re-fit is
+a translation — the model's section at t is moved onto the observed one
+(centroids) — applied to the model's section at t + k.
+:func:`write_prediction` writes what ``hifumotion predict`` promises.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from hifumotion.metrics import centroid
+from hifumotion.prediction.physics import Prediction, predict_frames, predicted_mask
+
+
+def shift_mask(mask: np.ndarray, shift_px: np.ndarray) -> np.ndarray:
+    """``mask`` translated by ``(dx, dy)`` px (bilinear, re-thresholded); what leaves the image is lost."""
+    from scipy import ndimage
+
+    moved = ndimage.shift(mask.astype(float), (float(shift_px[1]), float(shift_px[0])), order=1, mode="constant")
+    return moved >= 0.5
+
+
+def online_predictions(pred: Prediction, spec, reference, observed_masks: np.ndarray, horizons_frames,
+                       now_frames) -> dict[int, dict[int, np.ndarray]]:
+    """``{k: {t + k: mask}}``: at each ``t`` in ``now_frames`` the model's section of t + k, moved by
+    the offset between the observed and the model's section at t (model masks from ``pred.run``)."""
+    run = pred.run
+    cache: dict[int, np.ndarray] = {}
+
+    def model_mask(f):
+        if f not in cache:
+            cache[f] = predicted_mask(run.kept[f], run.rest_mm, spec.spacing_mm, reference)
+        return cache[f]
+
+    out: dict[int, dict[int, np.ndarray]] = {int(k): {} for k in horizons_frames}
+    for t in now_frames:
+        if not observed_masks[t].any() or t not in run.kept:
+            continue
+        m_t = model_mask(t)
+        if not m_t.any():
+            continue
+        offset = centroid(observed_masks[t]) - centroid(m_t)   # (x, y) px
+        for k in horizons_frames:
+            f = t + int(k)
+            if f in run.kept:
+                out[int(k)][f] = shift_mask(model_mask(f), offset)
+    return out
+
+
+def online_csv(predictions: dict[int, dict[int, np.ndarray]], observed_masks: np.ndarray, pixel_mm: float,
+               frame_interval_s: float) -> str:
+    """``horizon_frames, horizon_ms, frame, predicted_x_mm, predicted_y_mm, tracked_x_mm, tracked_y_mm, error_mm``:
+    the online predictions' centroids against the tracked section of the same frame (when there is one)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["horizon_frames", "horizon_ms", "frame", "predicted_x_mm", "predicted_y_mm", "tracked_x_mm",
+                "tracked_y_mm", "error_mm"])
+    for k in sorted(predictions):
+        for f in sorted(predictions[k]):
+            m = predictions[k][f]
+            if not m.any():
+                continue
+            p = centroid(m, pixel_mm)
+            row = [k, f"{1000 * k * frame_interval_s:.1f}", f, f"{p[0]:.4f}", f"{p[1]:.4f}"]
+            if f < len(observed_masks) and observed_masks[f].any():
+                o = centroid(observed_masks[f], pixel_mm)
+                row += [f"{o[0]:.4f}", f"{o[1]:.4f}", f"{np.hypot(*(p - o)):.4f}"]
+            else:
+                row += ["", "", ""]
+            w.writerow(row)
+    return buf.getvalue()
+
+
+def predict_calibrated(spec, k, reference, frames, online_frames=()) -> Prediction:
+    """The fitted model's masks of ``frames`` (and of ``online_frames``, kept for the online mode)."""
+    wanted = sorted(set(int(f) for f in frames) | set(int(f) for f in online_frames))
+    return predict_frames(spec, k, reference, wanted)
+
+
+def aim_csv(pred: Prediction, frame_interval_s: float, masks: dict | None = None) -> str:
+    """``frame, time_s, aim_x_mm, aim_y_mm, shift_x_mm, shift_y_mm, shift_mm[, centroid_x_mm, centroid_y_mm]``.
+
+    Image axes (x = column, y = row) in mm from pixel (0, 0)'s centre; the shift is from the plan (frame 0)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame", "time_s", "aim_x_mm", "aim_y_mm", "shift_x_mm", "shift_y_mm", "shift_mm",
+                "section_centroid_x_mm", "section_centroid_y_mm"])
+    for f, a in enumerate(pred.aim_mm):
+        d = a - pred.aim_plan_mm
+        c = ("", "")
+        if masks is not None and f in masks and masks[f].any():
+            c = tuple(f"{v:.4f}" for v in centroid(masks[f], pred.pixel_mm))
+        w.writerow([f, f"{f * frame_interval_s:.4f}", f"{a[0]:.4f}", f"{a[1]:.4f}", f"{d[0]:.4f}", f"{d[1]:.4f}",
+                    f"{np.hypot(*d):.4f}", *c])
+    return buf.getvalue()
+
+
+def write_prediction(folder: str | Path, pred: Prediction, frames, frame_interval_s: float) -> None:
+    """``frames/frame_NNNN.png`` (0/255), ``contours.csv`` and ``aim.csv`` into ``folder``."""
+    from hifumotion.contour import Contour
+    from hifumotion.io.files import write_text
+    from hifumotion.io.writers import write_contours_csv, write_png_stack
+
+    folder = Path(folder)
+    (folder / "frames").mkdir(parents=True, exist_ok=True)
+    frames = [int(f) for f in frames if int(f) in pred.masks]
+    for f in frames:
+        write_png_stack(folder / "frames", pred.masks[f], prefix="frame_", start=f, digits=4)
+    contours = {f: Contour.from_mask(pred.masks[f], pred.pixel_mm) for f in frames if pred.masks[f].any()}
+    write_contours_csv(folder / "contours.csv", contours)
+    write_text(folder / "aim.csv", aim_csv(pred, frame_interval_s, pred.masks))
+
+
+__all__ = ["online_predictions", "online_csv", "predict_calibrated", "write_prediction", "aim_csv", "shift_mask"]

@@ -1,0 +1,221 @@
+"""Parameter estimation and prediction: the objective, the estimators, the predicted sections, the CLI."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import disc
+from hifumotion.errors import InputError
+from hifumotion.estimation.evaluator import Evaluator
+from hifumotion.estimation.fit import degeneracy, least_squares_fit, uncertainty
+from hifumotion.estimation.iterative import iterative_estimate
+from hifumotion.estimation.model import Parameters
+from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
+from hifumotion.estimation.protocol import default_frames, parse_frames
+from hifumotion.estimation.space import SearchSpace
+from hifumotion.particles.section import Plane, displacement_at
+from hifumotion.prediction.physics import ReferenceShape, predicted_mask
+
+PLANE = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (120, 140), 0.2)
+
+
+def test_paper_protocol_frames():
+    # Section 3.2: ground truth every 10th step from the 20th; 1st–9th train, 10th–18th validate
+    train, valid = default_frames(200)
+    assert train == list(range(20, 101, 10))
+    assert valid == list(range(110, 191, 10))
+    train, valid = default_frames(40)
+    assert train == list(range(4, 21, 2)) and valid == list(range(22, 39, 2))
+    assert parse_frames("20:101:10", 200, "x") == train_200() and parse_frames("5,3", 10, "x") == [3, 5]
+    with pytest.raises(InputError, match="--training"):
+        parse_frames("0,300", 200, "--training")
+    with pytest.raises(InputError):
+        default_frames(10)
+
+
+def train_200():
+    return list(range(20, 101, 10))
+
+
+def test_residual_is_the_signed_distance_to_the_observed_contour():
+    # a disc of radius 30 px; model points on circles of 30 + d px: residual −d px (outside), in mm
+    cx, cy, r = 70.0, 60.0, 30.0
+    masks = np.stack([disc(PLANE.shape, cx, cy, r)] * 3)
+    data = TrainingData.from_masks(masks, [1, 2], PLANE)
+    angles = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    points = np.zeros((3, 32, 3))
+    for f, d in ((1, 4.0), (2, -6.0)):
+        rad = r + d
+        points[f, :, 0] = (cx + rad * np.cos(angles)) * PLANE.pixel_mm
+        points[f, :, 1] = (cy + rad * np.sin(angles)) * PLANE.pixel_mm
+        points[f, :, 2] = 5.0
+    res = residuals_mm(points, data)
+    assert res.shape == (2, 32)
+    assert np.allclose(res[0], -4.0 * 0.2, atol=0.1)   # outside by 4 px
+    assert np.allclose(res[1], 6.0 * 0.2, atol=0.1)    # inside by 6 px
+    assert np.allclose(frame_sums_mm(res), [32 * 0.8, 32 * 1.2], rtol=0.08)
+    with pytest.raises(InputError, match="training frames"):
+        TrainingData.from_masks(masks, [5], PLANE)
+
+
+def test_displacement_is_exact_for_an_affine_motion():
+    g = np.stack(np.meshgrid(*[np.arange(0, 10.0, 1.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    a = np.array([[0.02, 0.01, 0.0], [-0.01, 0.03, 0.0], [0.0, 0.0, -0.02]])
+    moved = g + g @ a.T + np.array([0.3, -0.2, 0.1])
+    q = np.array([[4.3, 5.1, 4.9], [2.5, 3.5, 6.2]])
+    u, covered = displacement_at(q, moved, g, 1.0)
+    assert covered.all()
+    # Shepard weights reproduce constants exactly; a linear field to the weights' centring error
+    expected = q @ a.T + np.array([0.3, -0.2, 0.1])
+    assert np.allclose(u, expected, atol=0.02)
+
+
+def test_predicted_section_follows_a_rigid_shift():
+    mask0 = disc(PLANE.shape, 70, 60, 25)
+    ref = ReferenceShape(mask0, PLANE)
+    g = np.stack(np.meshgrid(np.arange(8, 20, 1.0), np.arange(6, 18, 1.0), np.arange(2, 9, 1.0),
+                             indexing="ij"), -1).reshape(-1, 3)
+    shift = np.array([1.0, -0.6, 0.0])   # mm: 5 px right, 3 px down
+    pred = predicted_mask(g + shift, g, 1.0, ref)
+    expected = disc(PLANE.shape, 75, 57, 25)
+    from hifumotion.metrics import centroid, dice
+
+    assert dice(pred, expected) > 0.99
+    assert np.allclose(centroid(pred, 0.2) - centroid(mask0, 0.2), shift[:2], atol=0.03)
+
+
+class AnalyticEvaluator(Evaluator):
+    """An evaluator whose 'runs' are a known function of the parameters, in process (no Dask).
+
+    r = Σ_c pattern_c × (θ_c − θ*_c) + curvature, with no dependence on β2: the truth is θ*,
+    β2 is not determined."""
+
+    def __init__(self, truth: Parameters, frames=(1, 2, 3)):
+        space = SearchSpace()
+        masks = np.stack([disc(PLANE.shape, 70, 60, 25)] * (max(frames) + 1))
+        data = TrainingData.from_masks(masks, frames, PLANE)
+
+        class Spec:
+            points_mm = np.zeros((16, 3))
+
+        super().__init__(Spec(), data, space)
+        self.truth = space.theta(truth)
+        rng = np.random.default_rng(0)
+        self.patterns = rng.normal(0, 1, (3, len(frames), 16))
+        self._client = "analytic"
+
+    def _submit(self, ks, n):
+        out = []
+        for k in ks:
+            d = self.space.theta(k) - self.truth
+            # F, E, β1 scaled together leave the push unchanged: the residual sees ln(E/F), ln(β1/F)
+            d[0] -= np.log(k.force_n / self.space.force_n)
+            d[2] -= np.log(k.force_n / self.space.force_n)
+            r = sum(p * v for p, v in zip(self.patterns, (d[0], d[1] * 10, d[2] * 0.3)))
+            r = r + 0.1 * d[0] ** 2
+            out.append({"residuals_mm": r[:n], "seconds": 0.0, "steps": 0})
+            self.runs += 1
+        return out
+
+
+def test_least_squares_recovers_known_parameters_and_flags_the_undetermined():
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5)
+    ev = AnalyticEvaluator(truth)
+    start = ev.space.theta(Parameters(0.25, 20000.0, 0.47, 1e4, 0.7))
+    fit = least_squares_fit(ev, start, max_evaluations=20)
+    k = ev.space.parameters(fit.theta)
+    assert k.youngs_modulus_pa == pytest.approx(9000.0, rel=0.01)
+    assert k.poisson_ratio == pytest.approx(0.43, abs=0.002)
+    assert k.beta1 == pytest.approx(2e5, rel=0.05)
+    unc = uncertainty(ev, fit.theta)
+    assert unc.determined["log_E"] and unc.determined["nu"]
+    assert not unc.determined["beta2"]          # the residuals never depend on it
+    # scaling F, E, β1 together costs nothing: the push cannot tell them apart
+    costs = {d["factor"]: d["cost_mm"] for d in degeneracy(ev, fit.theta)}
+    assert costs[2.0] == pytest.approx(costs[1.0], abs=1e-6) and costs[0.5] == pytest.approx(costs[1.0], abs=1e-6)
+
+
+def test_table1_meets_its_thresholds():
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5)
+    ev = AnalyticEvaluator(truth, frames=(1, 2, 3, 4))
+    start = ev.space.theta(Parameters(0.25, 15000.0, 0.45, 5e4, 0.5))
+    result = iterative_estimate(ev, start, threshold_mm_per_point=0.05, max_runs=400)
+    assert result.events[0]["rule"].startswith("step 1")
+    assert result.events[0]["S_mm"][0] <= result.threshold_mm / 2 + 1e-9     # S_1 ≤ T/2
+    assert result.accepted and np.all(result.frame_sums_mm <= result.threshold_mm)
+    assert result.threshold_mm == pytest.approx(0.05 * 16)
+
+
+def test_search_log_resumes(tmp_path):
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5)
+    ev = AnalyticEvaluator(truth)
+    ev.log_path = tmp_path / "log.jsonl"
+    thetas = [ev.space.theta(truth) + d for d in (0.0, 0.1, -0.1)]
+    first = ev.residuals(thetas)
+    again = AnalyticEvaluator(truth)
+    again.log_path = tmp_path / "log.jsonl"
+    again._read_log()
+    again.runs = 0
+    second = again.residuals(thetas)
+    assert again.runs == 0 and again.resumed == 3
+    assert all(np.allclose(a, b, atol=1e-5) for a, b in zip(first, second))
+
+
+@pytest.mark.slow
+def test_prepare_segments_reconstructs_and_tracks_the_twin(small_twin):
+    from hifumotion.estimation.prepare import prepare
+    from hifumotion.experiment.observed import load_observed
+    from hifumotion.metrics import dice
+    from hifumotion.scoring import read_frame_masks
+
+    folder, result = small_twin
+    obs = prepare(load_observed(folder / "observed"))
+    truth_sweep = result.sweep_masks
+    both = obs.sweep.present & truth_sweep.reshape(len(truth_sweep), -1).any(1)
+    scores = [dice(a, b) for a, b in zip(obs.sweep.masks[both], truth_sweep[both])]
+    assert np.median(scores) > 0.9
+    blob_volume = json.loads((folder / "truth" / "parameters.json").read_text())["facts"]["blob_volume_mm3"]
+    assert 0.8 < obs.reconstruction.volume_mm3 / blob_volume < 1.3
+    truth = read_frame_masks(folder / "truth")
+    assert dice(obs.frame_masks[0], truth[0]) > 0.93
+    # nothing below the pool's floor (tank y < 0) is tissue
+    floor_row = int(np.ceil(-obs.offset_mm[1] / obs.pixel_mm))
+    assert not obs.frame_masks[:, :floor_row].any() and not obs.sweep.masks[:, :floor_row].any()
+
+
+@pytest.mark.slow
+def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
+    folder, _ = small_twin
+    cal, pred = tmp_path / "cal", tmp_path / "pred"
+    cli = [sys.executable, "-m", "hifumotion"]
+    out = subprocess.run(cli + ["calibrate", str(folder / "observed"), "-o", str(cal), "--particles", "300",
+                                "--search-particles", "150", "--workers", "2", "--max-evaluations", "2"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr + out.stdout
+    params = json.loads((cal / "parameters.json").read_text())
+    for name in ("youngs_modulus_pa", "poisson_ratio", "beta1_pa_s_pow", "beta2", "external_force_n"):
+        assert "value" in params["parameters"][name] and "determined" in params["parameters"][name]
+    assert params["fit"]["runs"] > 5 and (cal / "search_log.jsonl").is_file()
+    assert (cal / "model" / "scene.toml").is_file() and (cal / "observation" / "tissue.vtp").is_file()
+    out = subprocess.run(cli + ["predict", str(cal), "-o", str(pred), "--online", "2,4"], capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr + out.stdout
+    train, valid = default_frames(40)
+    assert all((pred / "frames" / f"frame_{f:04d}.png").is_file() for f in train + valid)
+    online = np.genfromtxt(pred / "online.csv", delimiter=",", names=True)
+    assert set(online["horizon_frames"]) == {2, 4} and np.all(online["error_mm"] >= 0)
+    aim = np.genfromtxt(pred / "aim.csv", delimiter=",", names=True)
+    assert len(aim) == max(valid) + 1 and abs(aim["shift_mm"][0]) < 1e-9
+    out = subprocess.run(cli + ["score", str(pred), str(folder / "truth")], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((pred / "score" / "score.json").read_text())["summary"]
+    assert (pred / "score" / "overlays.png").is_file()      # Fig. 4
+    # a floor, not the target: the predicted sections overlap the truth
+    assert summary["validation"]["dsc"]["mean"] > 0.7
+    # existing output is never overwritten without --overwrite
+    again = subprocess.run(cli + ["predict", str(cal), "-o", str(pred)], capture_output=True, text=True)
+    assert again.returncode == 2 and "overwrite" in (again.stdout + again.stderr)
