@@ -60,3 +60,11 @@ def test_score_cli_writes_table_and_refuses_to_overwrite(tmp_path):
     assert (pred / "score" / "score.csv").read_text().startswith("frame,set,dsc")
     again = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert again.returncode == 2 and "Traceback" not in again.stderr
+
+
+def test_whole_short_series_scores_on_the_scaled_protocol():
+    # a whole series of 40 frames: training at 10 %…50 % of it, validation at 55 %…95 %
+    truth = {f: _disc((40, 40), (20, 20), 8) for f in range(40)}
+    summary = score_masks(truth, truth, 0.5).summary()
+    assert summary["training"]["frames"] == list(range(4, 21, 2))
+    assert summary["validation"]["frames"] == list(range(22, 39, 2))

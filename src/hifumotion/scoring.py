@@ -63,16 +63,18 @@ def score_masks(predicted: dict[int, np.ndarray], truth: dict[int, np.ndarray], 
                 training=None, validation=None) -> ScoreTable:
     """Score every frame present in both (masks as bool arrays on the same grid).
 
-    The sets default to the paper's protocol scaled to the truth's series length
-    (:func:`~hifumotion.estimation.protocol.default_frames`: 20, 30 … 100 and 110 … 190 for 200 frames)."""
+    The sets default to the paper's frames (20, 30 … 100 and 110 … 190), scaled to the series'
+    length when the truth holds a whole series 0 … n−1 (:func:`~hifumotion.estimation.protocol.default_frames`)."""
     from hifumotion.estimation.protocol import default_frames
 
     common = sorted(set(predicted) & set(truth))
     if not common:
         raise InputError("no frame number is in both the prediction and the truth")
     if training is None or validation is None:
+        # a whole series (frames 0 … n−1) gets the protocol scaled to its length; sampled frames the paper's
         n = max(truth) + 1
-        auto_train, auto_valid = default_frames(n) if n >= 20 else (TRAINING_FRAMES, VALIDATION_FRAMES)
+        whole = len(truth) == n and n >= 20
+        auto_train, auto_valid = default_frames(n) if whole else (TRAINING_FRAMES, VALIDATION_FRAMES)
         training = auto_train if training is None else training
         validation = auto_valid if validation is None else validation
     table = ScoreTable()

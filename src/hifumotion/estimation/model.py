@@ -62,7 +62,7 @@ class ModelSettings:
     settle_periods: float = 6.0         # settling time in 1/ω of the slowest elastic mode
     cfl: float = 0.4
     max_step_s: float = 5e-3
-    force_ramp_s: float = 0.5           # the bar's force rises linearly over this time (s)
+    force_ramp_s: float | None = None   # the force's linear rise (s); default: setup.json's bar.force_ramp_s, else 0
     tissue_density_kg_m3: float = 1050.0
     rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s)
     contour_points: int = 64            # size of the point set A
@@ -129,7 +129,8 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
                         tip_mm=_touching_tip(tissue, np.asarray(b["tip_at_rest_mm"], float),
                                              np.asarray(b["direction"], float), float(b["radius_mm"]), dx),
                         weight_supported=bool(b.get("weight_supported", True)),
-                        force_n=Parameters().force_n, ramp_s=s.force_ramp_s)
+                        force_n=Parameters().force_n,
+                        ramp_s=float(s.force_ramp_s if s.force_ramp_s is not None else b.get("force_ramp_s", 0.0)))
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"setup.json: expected tank.size_mm, tank.water_depth_mm and bar.radius_mm, length_mm, "
                          f"direction, tip_at_rest_mm ({exc})", "setup.json") from None

@@ -344,7 +344,8 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     write_contours_csv(obs / "initial_contour.csv", {0: Contour.from_mm(clicked, px)})
     write_json(obs / "setup.json", {
         "description": "What the operator of the HIFU device knows: image geometry and timing, the pool, "
-                       "the bar's shape and where it starts. Tank frame in mm, y up; image rows run "
+                       "the bar's shape, where it starts and how long its force takes to rise (not how large it "
+                       "is). Tank frame in mm, y up; image rows run "
                        "upwards from the probe (depth), columns along x.",
         "frame_interval_s": interval, "frames": int(len(times)), "frame_files": "frames/frame_%04d.png",
         "sweep_files": "sweep/slice_%03d.png", "initial_contour_frame": 0,
@@ -352,7 +353,9 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
         "tank": {"size_mm": list(cfg.tank.size_mm), "water_depth_mm": cfg.tank.water_depth_mm},
         "bar": {"enabled": cfg.bar.enabled, "radius_mm": cfg.bar.radius_mm, "length_mm": cfg.bar.length_mm,
                 "direction": axis.tolist(), "tip_at_rest_mm": tip0.tolist(),
-                "weight_supported": cfg.bar.weight_supported},
+                "weight_supported": cfg.bar.weight_supported,
+                # how the push is applied, not how hard: the force rises linearly over this time, then holds
+                "force_ramp_s": cfg.bar.ramp_s},
     })
     write_png_stack(tru / "frames", frame_masks, prefix="frame_", digits=4)
     write_png_stack(tru / "sweep", sweep_masks, prefix="slice_", digits=3)
