@@ -60,11 +60,11 @@ class ModelSettings:
     support_factor: float = 2.0         # kernel support h in spacings
     mass_scaling: float = 2.0e4         # inertia multiplier of the quasi-static push
     settle_periods: float = 6.0         # settling time in 1/ω of the slowest elastic mode
-    cfl: float = 0.4
-    max_step_s: float = 5e-3
+    cfl: float = 0.4                    # safety factor on the time step
+    max_step_s: float = 5e-3            # largest time step (s)
     force_ramp_s: float | None = None   # the force's linear rise (s); default: setup.json's bar.force_ramp_s, else 0
     tissue_density_kg_m3: float = 1050.0
-    rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s)
+    rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s); a regularisation, not fitted
     contour_points: int = 64            # size of the point set A
 
 
@@ -105,15 +105,15 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     s = settings or ModelSettings()
     setup = observation.observed.setup
     rec = observation.reconstruction
-    # the paper's particle count: the lattice misses a little of the surface, so shrink until it is reached
-    # The tissue rests on the pool's floor (y = 0): a segmentation that took in some of the
-    # bright membrane puts particles below it, which the floor's walls would eject.
     def fill(dx):
+        # the tissue rests on the pool's floor (y = 0): a segmentation that took in some of the
+        # bright membrane puts particles below it, which the floor's walls would eject
         filled = rec.particles(dx)
         tissue = filled.positions_mm + observation.offset_mm
         above = tissue[:, 1] >= 0.5 * dx
         return tissue[above], filled.volume_mm3[above]
 
+    # the paper's particle count: the lattice misses a little of the surface, so shrink until it is reached
     dx = (rec.volume_mm3 / s.tissue_particles) ** (1 / 3)
     tissue, volume = fill(dx)
     while len(tissue) < s.tissue_particles:
