@@ -83,8 +83,10 @@ def iterative_estimate(ev: Evaluator, theta0: np.ndarray, threshold_mm_per_point
     theta = np.asarray(theta0, float).copy()
     events = []
     runs = 0
+    # each training time gets its share of the runs, so an unreachable S_1 ≤ T/2 cannot spend them all
+    share = max(max_runs // n, 4 * len(theta))
     # Step 1: t = 1, S_1 ≤ T/2
-    theta, used = _adjust(ev, theta, 1, np.array([big_t / 2]), max_runs)
+    theta, used = _adjust(ev, theta, 1, np.array([big_t / 2]), min(share, max_runs))
     runs += used
     events.append({"t": 1, "frame": int(ev.data.frames[0]), "rule": "step 1 (S_1 ≤ T/2)", "runs": used,
                    "S_mm": frame_sums_mm(ev.one(theta, upto=1)).round(3).tolist()})
@@ -96,7 +98,7 @@ def iterative_estimate(ev: Evaluator, theta0: np.ndarray, threshold_mm_per_point
             events.append({"t": t, "frame": int(ev.data.frames[t - 1]), "rule": "1 (kept)", "runs": 1,
                            "S_mm": s.round(3).tolist()})
             continue
-        theta, used = _adjust(ev, theta, t, limits, max(max_runs - runs, 0))
+        theta, used = _adjust(ev, theta, t, limits, min(share, max(max_runs - runs, 0)))
         runs += used
         events.append({"t": t, "frame": int(ev.data.frames[t - 1]), "rule": "2 (adjusted)", "runs": used,
                        "S_mm": frame_sums_mm(ev.one(theta, upto=t)).round(3).tolist()})

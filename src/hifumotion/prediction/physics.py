@@ -94,8 +94,9 @@ class Prediction:
 
 def aim_point_px(mask: np.ndarray) -> np.ndarray:
     """The frame-0 centroid ``(x = col, y = row)`` in px: the default planned focus."""
-    rows, cols = np.nonzero(mask)
-    return np.array([cols.mean(), rows.mean()])
+    from hifumotion.metrics import centroid
+
+    return centroid(mask)
 
 
 def predict_frames(spec: ModelSpec, k: Parameters, reference: ReferenceShape, frames, last_frame: int | None = None,
