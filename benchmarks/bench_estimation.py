@@ -81,10 +81,7 @@ def run(twin: Path, mode: str, method: str, workers: int | None, horizons: list[
     t1 = time.perf_counter()
     now = list(range(train[0], valid[-1] - min(horizons) + 1, max(1, n // 40)))
     online_frames = sorted({f for t in now for h in [0, *horizons] if (f := t + h) < n})
-    from hifumotion.prediction.physics import ReferenceShape
-
-    ref = ReferenceShape(obs.frame_masks[0], obs.frame_plane, obs.reconstruction.distance_mm,
-                         obs.reconstruction.voxel_mm, tuple(np.asarray(obs.reconstruction.origin_mm) + obs.offset_mm))
+    ref = obs.reference_shape()
     pred = predict_calibrated(cal.spec, k, ref, train + valid, online_frames)
     predict_s = time.perf_counter() - t1
     window_s = (valid[-1] - valid[0]) * observed.frame_interval_s

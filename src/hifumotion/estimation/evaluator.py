@@ -194,9 +194,4 @@ class Evaluator:
         return self.residuals([theta], upto)[0]
 
 
-def local_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int | None = None) -> np.ndarray:
-    """The residuals of one run in this process (no Dask): for tests and single checks."""
-    return forward_residuals(spec, data, k, upto, threads=None)["residuals_mm"]
-
-
-__all__ = ["Evaluator", "forward_residuals", "local_residuals"]
+__all__ = ["Evaluator", "forward_residuals"]

@@ -73,6 +73,15 @@ class Observation:
         """The time series' imaging plane in the tank frame."""
         return _plane_at(self.offset_mm, self.observed, self.observed.setup["imaging"]["frames_plane_z_mm"])
 
+    def reference_shape(self):
+        """The frame-0 shape the predictions carry: the frame-0 mask in the imaging plane,
+        continued out of it by the reconstruction (tank frame)."""
+        from hifumotion.prediction.physics import ReferenceShape
+
+        rec = self.reconstruction
+        return ReferenceShape(self.frame_masks[0], self.frame_plane, rec.distance_mm, rec.voxel_mm,
+                              tuple(float(v) for v in np.asarray(rec.origin_mm) + self.offset_mm))
+
     def inside_tank(self, points_mm: np.ndarray) -> np.ndarray:
         """Signed distance (mm, positive inside) of tank points to the reconstructed resting tissue."""
         return self.reconstruction.inside(np.asarray(points_mm, float) - self.offset_mm)

@@ -24,13 +24,12 @@ import numpy as np
 
 from hifumotion.errors import InputError
 from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters
+from hifumotion.io.files import write_text
 from hifumotion.particles.section import Plane
 from hifumotion.prediction.physics import ReferenceShape
 
 
 def _csv(path: Path, header: str, rows: np.ndarray) -> None:
-    from hifumotion.io.files import write_text
-
     body = "\n".join(",".join(f"{v:.6f}" for v in r) for r in rows)
     write_text(path, header + "\n" + body + "\n")
 
@@ -52,19 +51,17 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path, extra: d
     scene.tissue.youngs_modulus_pa, scene.tissue.poisson_ratio = k.youngs_modulus_pa, k.poisson_ratio
     scene.tissue.beta1, scene.tissue.beta2, scene.bar.force_n = k.beta1, k.beta2, k.force_n
     scene.tissue.particles_csv = Path("tissue_particles.csv")
-    from hifumotion.io.files import write_text
-
     write_text(folder / "model" / "scene.toml", dump_toml(scene))
     _csv(folder / "model" / "tissue_particles.csv", "x_mm,y_mm,z_mm,volume_mm3",
          np.column_stack([spec.tissue_mm, spec.tissue_volume_mm3]))
     _csv(folder / "model" / "contour_points.csv", "x_mm,y_mm,z_mm", spec.points_mm)
     rec = obs.reconstruction
-    plane = obs.frame_plane
+    ref = obs.reference_shape()
+    plane = ref.plane
     with atomic_path(folder / "observation" / "reference.npz") as tmp:
         with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, frame0_mask=obs.frame_masks[0], rec_distance_mm=rec.distance_mm.astype(np.float32),
-                                rec_voxel_mm=rec.voxel_mm,
-                                rec_origin_mm=np.asarray(rec.origin_mm) + obs.offset_mm,
+            np.savez_compressed(fh, frame0_mask=ref.frame0_mask, rec_distance_mm=ref.rec_distance_mm.astype(np.float32),
+                                rec_voxel_mm=ref.rec_voxel_mm, rec_origin_mm=np.asarray(ref.rec_origin_mm),
                                 plane_origin_mm=np.asarray(plane.origin_mm), plane_u=np.asarray(plane.u),
                                 plane_v=np.asarray(plane.v), plane_shape=np.asarray(plane.shape),
                                 pixel_mm=plane.pixel_mm)
