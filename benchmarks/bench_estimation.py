@@ -30,7 +30,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 
 
 def _expert_contours(truth: Path, frames: list[int], out: Path) -> Path:
@@ -42,30 +41,19 @@ def _expert_contours(truth: Path, frames: list[int], out: Path) -> Path:
     return out
 
 
-def _scores(masks: dict, truth: dict, pixel: float, frames) -> dict:
-    from hifumotion.metrics import centroid_distance, dice, hausdorff
-
-    d = [dice(masks[f], truth[f]) for f in frames]
-    h = [hausdorff(masks[f], truth[f], pixel, percentile=95) for f in frames]
-    c = [centroid_distance(masks[f], truth[f], pixel) for f in frames]
-    return {"dsc_mean": float(np.mean(d)), "dsc_min": float(np.min(d)), "hd95_mean_mm": float(np.mean(h)),
-            "centroid_mean_mm": float(np.mean(c)), "centroid_max_mm": float(np.max(c))}
-
-
 def run(twin: Path, mode: str, method: str, workers: int | None, horizons: list[int]) -> dict:
-    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate
+    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate, recovered_parameters
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import default_frames
     from hifumotion.experiment.observed import load_observed
-    from hifumotion.prediction.baselines import hold_last, kalman_predict, ncc_track
-    from hifumotion.prediction.pipeline import online_predictions, predict_calibrated
+    from hifumotion.prediction.evaluate import evaluate, online_schedule
+    from hifumotion.prediction.pipeline import predict_calibrated
     from hifumotion.scoring import read_frame_masks
 
     truth_dir = twin / "truth"
     params = json.loads((truth_dir / "parameters.json").read_text())
     truth = read_frame_masks(truth_dir)
     observed = load_observed(twin / "observed")
-    pixel = observed.pixel_mm
     n = len(observed.frames)
     train, valid = default_frames(n)
     tmp = Path(tempfile.mkdtemp(prefix="bench_estimation_"))
@@ -79,56 +67,16 @@ def run(twin: Path, mode: str, method: str, workers: int | None, horizons: list[
     k = cal.parameters
 
     t1 = time.perf_counter()
-    now = list(range(train[0], valid[-1] - min(horizons) + 1, max(1, n // 40)))
-    online_frames = sorted({f for t in now for h in [0, *horizons] if (f := t + h) < n})
+    now, online_frames = online_schedule(train, valid, horizons, n)
     ref = obs.reference_shape()
     pred = predict_calibrated(cal.spec, k, ref, train + valid, online_frames)
     predict_s = time.perf_counter() - t1
     window_s = (valid[-1] - valid[0]) * observed.frame_interval_s
+    ev = evaluate(pred, cal.spec, ref, obs.frame_masks, observed.frames, truth, train, valid,
+                  observed.frame_interval_s, horizons, now)
+    physics, baselines, online = ev.physics, ev.baselines, ev.online
 
-    # baselines on the validation window, from the observation the physics had (its training masks)
-    seen = {f: obs.frame_masks[f] for f in [0] + train}
-    baselines = {
-        "no_motion": _scores(hold_last(seen, valid), truth, pixel, valid),
-        "kalman": _scores(kalman_predict(seen, valid, observed.frame_interval_s, pixel), truth, pixel, valid),
-    }
-    physics = {"training": _scores(pred.masks, truth, pixel, train),
-               "validation": _scores(pred.masks, truth, pixel, valid)}
-
-    # online: at t, predict t + k
-    online = {}
-    physics_online = online_predictions(pred, cal.spec, ref, obs.frame_masks, horizons, now)
-    ncc = ncc_track(observed.frames, obs.frame_masks[0])
-    for h in horizons:
-        targets = [t + h for t in now if t + h < n and t + h in physics_online[h]]
-        entry = {"horizon_frames": h, "horizon_ms": 1000 * h * observed.frame_interval_s, "frames": len(targets)}
-        entry["physics"] = _scores(physics_online[h], truth, pixel, targets)
-        entry["no_motion"] = _scores({t + h: obs.frame_masks[t] for t in now}, truth, pixel, targets)
-        entry["ncc"] = _scores({t + h: ncc[t] for t in now}, truth, pixel, targets)
-        kal = {}
-        for t in now:
-            if t + h in targets:
-                past = {f: obs.frame_masks[f] for f in range(max(0, t - 10), t + 1)}
-                kal.update(kalman_predict(past, [t + h], observed.frame_interval_s, pixel))
-        entry["kalman"] = _scores(kal, truth, pixel, targets)
-        online[str(h)] = entry
-
-    true_fe = params["external_force_n"] / params["youngs_modulus_pa"]
-    true_be = params["beta1_pa_s_pow"] / params["youngs_modulus_pa"]
-    report = cal.report()
-    recovered = {
-        "force_over_youngs": {"fit": k.force_n / k.youngs_modulus_pa, "truth": true_fe,
-                              "rel_error": (k.force_n / k.youngs_modulus_pa) / true_fe - 1,
-                              "determined": report["force_over_youngs_m2"]["determined"]},
-        "beta1_over_youngs": {"fit": k.beta1 / k.youngs_modulus_pa, "truth": true_be,
-                              "rel_error": (k.beta1 / k.youngs_modulus_pa) / true_be - 1,
-                              "determined": report["beta1_over_youngs_s_pow"]["determined"]},
-        "poisson_ratio": {"fit": k.poisson_ratio, "truth": params["poisson_ratio"],
-                          "rel_error": k.poisson_ratio / params["poisson_ratio"] - 1,
-                          "determined": report["poisson_ratio"]["determined"]},
-        "beta2": {"fit": k.beta2, "truth": params["beta2"], "rel_error": k.beta2 / params["beta2"] - 1,
-                  "determined": report["beta2"]["determined"]},
-    }
+    recovered = recovered_parameters(cal.report(), k, params)
     return {
         "mode": mode, "method": method, "training_frames": train, "validation_frames": valid,
         "calibration_s": cal_s, "prepare_s": prep_s, "calibration_timings_s": cal.timings_s, "runs": cal.runs,

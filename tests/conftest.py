@@ -23,6 +23,12 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
+@pytest.fixture
+def shared_data_or_none() -> Path | None:
+    """``../shared/data`` when present, else ``None`` (for tests that run either way)."""
+    return SHARED_DATA if (SHARED_DATA / "ddti" / "init.json").is_file() else None
+
+
 def disc(shape: tuple[int, int], cx: float, cy: float, r: float) -> np.ndarray:
     """Pixels whose centre is within ``r`` of ``(cx, cy)`` (x = column, y = row)."""
     rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]

@@ -160,7 +160,9 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         timings["uncertainty_s"] = time.perf_counter() - t2
         tell("search", 1.0)
 
-        if s.space_mapping and s.mapping_runs > 0:
+        # one model only (the search ran at the final resolution): nothing to map
+        coarser = search_settings.tissue_particles < s.model.tissue_particles
+        if s.space_mapping and s.mapping_runs > 0 and coarser:
             t3 = time.perf_counter()
             r_search = ev.one(theta)
             # only the coordinates the data determine move, by at most MAX_MAPPING_STEP step units
@@ -194,6 +196,21 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), fit_result, table1,
                        mapped, degeneracy, unc.correlation.round(3).tolist(), final, search, observation,
                        ev.runs, timings)
+
+
+def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:
+    """The fit beside the truth (a twin's ``truth/parameters.json``) on what the data can fix:
+    F/E and β1/E (the push's scaling leaves only these), ν and β2 — value, truth, relative
+    error and whether the data determine it (``report``: :meth:`Calibration.report`)."""
+    e = truth["youngs_modulus_pa"]
+    pairs = {
+        "force_over_youngs_m2": (k.force_n / k.youngs_modulus_pa, truth["external_force_n"] / e),
+        "beta1_over_youngs_s_pow": (k.beta1 / k.youngs_modulus_pa, truth["beta1_pa_s_pow"] / e),
+        "poisson_ratio": (k.poisson_ratio, truth["poisson_ratio"]),
+        "beta2": (k.beta2, truth["beta2"]),
+    }
+    return {name: {"fit": fit, "truth": true, "rel_error": fit / true - 1, "std": report[name]["std"],
+                   "determined": report[name]["determined"]} for name, (fit, true) in pairs.items()}
 
 
 def _expected_runs(s: CalibrationSettings) -> int:

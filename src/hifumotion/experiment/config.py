@@ -97,9 +97,15 @@ PRESETS: dict[str, dict[str, Any]] = {
         "imaging": {"frames": 40, "frame_rate_hz": 4.0, "pixel_mm": 0.4, "sweep_gap_mm": 2.0},
         "run": {"particle_frames_every": 10},
     },
+    # the paper's protocol (200 frames at 20 Hz) on a coarse model: `hifumotion demo` in minutes
+    "demo": {
+        "resolution": {"model_tissue_particles": 600},
+        "imaging": {"pixel_mm": 0.3, "sweep_gap_mm": 1.5},
+        "run": {"particle_frames_every": 10},
+    },
 }
 
-Preset = Literal["default", "small"]
+Preset = Literal["default", "small", "demo"]
 
 
 def _merge(base: dict, extra: dict) -> dict:

@@ -32,6 +32,14 @@ def write_points_vtu(path: str | Path, points_mm: np.ndarray, point_data: dict[s
     return path
 
 
+def write_pvd(path: str | Path, entries) -> Path:
+    """A ParaView collection: ``entries`` are ``(time_s, file relative to the PVD)``."""
+    rows = "\n".join(f'    <DataSet timestep="{t:.9g}" group="" part="0" file="{n}"/>' for t, n in entries)
+    return write_text(path, '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" '
+                      'byte_order="LittleEndian">\n'
+                      f"  <Collection>\n{rows}\n  </Collection>\n</VTKFile>\n")
+
+
 def frame_data(system: ParticleSystem, pressure_pa: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Points (mm) and per-point data of the moving particles (water, tissue, bar)."""
     n = system.n_moving
@@ -89,15 +97,11 @@ class FrameWriter:
 
     def finish(self) -> None:
         """(Re)write the PVD index and the pose CSV for the frames so far."""
-        rows = "\n".join(f'    <DataSet timestep="{t:.9g}" group="" part="0" file="{n}"/>'
-                         for t, n in self.entries)
-        write_text(self.folder / "frames.pvd",
-                   '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
-                   f"  <Collection>\n{rows}\n  </Collection>\n</VTKFile>\n")
+        write_pvd(self.folder / "frames.pvd", self.entries)
         header = ("frame,time_s,body,centre_x_mm,centre_y_mm,centre_z_mm,q_w,q_x,q_y,q_z,"
                   "velocity_x_mm_s,velocity_y_mm_s,velocity_z_mm_s,applied_force_n,"
                   "contact_force_x_n,contact_force_y_n,contact_force_z_n")
         write_text(self.folder / "bar_pose.csv", header + "\n" + "\n".join(self.pose_rows) + "\n")
 
 
-__all__ = ["FrameWriter", "write_points_vtu", "frame_data"]
+__all__ = ["FrameWriter", "write_points_vtu", "write_pvd", "frame_data"]

@@ -120,4 +120,23 @@ def write_prediction(folder: str | Path, pred: Prediction, frames, frame_interva
     write_text(folder / "aim.csv", aim_csv(pred, frame_interval_s, pred.masks))
 
 
-__all__ = ["online_predictions", "online_csv", "predict_calibrated", "write_prediction", "aim_csv", "shift_mask"]
+def write_particles(folder: str | Path, pred: Prediction, frame_interval_s: float) -> Path:
+    """The model's tissue in the frames it kept: ``particles/frame_NNNN.vtu`` (positions in mm,
+    ``displacement_mm`` since frame 0) and ``tissue.pvd`` to play them in ParaView."""
+    from hifumotion.particles.output import write_points_vtu, write_pvd
+
+    folder = Path(folder)
+    (folder / "particles").mkdir(parents=True, exist_ok=True)
+    rest = pred.run.rest_mm
+    entries = []
+    for f in sorted(pred.run.kept):
+        name = f"particles/frame_{f:04d}.vtu"
+        x = pred.run.kept[f]
+        write_points_vtu(folder / name, x, {"displacement_mm": x - rest,
+                                            "displacement_magnitude_mm": np.linalg.norm(x - rest, axis=1)})
+        entries.append((f * frame_interval_s, name))
+    return write_pvd(folder / "tissue.pvd", entries)
+
+
+__all__ = ["online_predictions", "online_csv", "predict_calibrated", "write_prediction", "write_particles", "aim_csv",
+           "shift_mask"]

@@ -1,0 +1,125 @@
+"""Score a prediction and its baselines on one truth: the paper's Table 4, side by side.
+
+One function, :func:`evaluate`, used by the end-to-end pipeline (``hifumotion demo`` /
+``hifumotion run``) and by ``benchmarks/bench_estimation.py``:
+
+* the physics per frame (DSC, HD95, centroid error in mm) on the training and the
+  validation frames (:func:`~hifumotion.scoring.score_masks`);
+* the baselines on the validation window, from the same observation the physics had
+  (frame 0 and the training frames): **no motion** (the last training contour held) and
+  a **Kalman** filter on the contour's centroid and shape;
+* the **online** mode: at each frame t, predict t + k from what was seen up to t — the
+  physics re-anchored on the tracked frame t, holding frame t, the **NCC** template
+  tracker's frame t, and a Kalman filter over the last ten tracked frames.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hifumotion.scoring import ScoreTable, score_masks
+
+
+def summary(masks: dict, truth: dict, pixel_mm: float, frames) -> dict:
+    """DSC mean/min, HD95 mean (mm), centroid error mean/max (mm) over ``frames``."""
+    from hifumotion.metrics import centroid_distance, dice, hausdorff
+
+    frames = [f for f in frames if f in masks and f in truth]
+    if not frames:
+        return {"frames": 0}
+    d = [dice(masks[f], truth[f]) for f in frames]
+    h = [hausdorff(masks[f], truth[f], pixel_mm, percentile=95) if masks[f].any() else float("inf") for f in frames]
+    c = [centroid_distance(masks[f], truth[f], pixel_mm) if masks[f].any() else float("inf") for f in frames]
+    return {"frames": len(frames), "dsc_mean": float(np.mean(d)), "dsc_min": float(np.min(d)),
+            "hd95_mean_mm": float(np.mean(h)), "centroid_mean_mm": float(np.mean(c)),
+            "centroid_max_mm": float(np.max(c))}
+
+
+@dataclass
+class Evaluation:
+    """What :func:`evaluate` measured (JSON-ready through :meth:`as_dict`)."""
+
+    table: ScoreTable                     # the physics, per frame (Table 4)
+    physics: dict                         # training / validation summaries
+    baselines: dict                       # method -> validation summary
+    online: dict = field(default_factory=dict)   # horizon (frames, as str) -> method -> summary
+    baseline_masks: dict = field(default_factory=dict)   # method -> frame -> mask (validation)
+    online_masks: dict = field(default_factory=dict)     # horizon -> frame t + k -> the physics' online mask
+
+    def as_dict(self) -> dict:
+        return {"physics": self.physics, "baselines_validation": self.baselines, "online": self.online,
+                "per_frame": self.table.rows}
+
+
+def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, truth: dict, training, validation,
+             frame_interval_s: float, horizons=(), online_from=()) -> Evaluation:
+    """Score ``pred`` (:class:`~hifumotion.prediction.physics.Prediction`) and the baselines.
+
+    Parameters
+    ----------
+    pred, spec, reference
+        The fitted model's prediction, its model and the frame-0 shape it carries.
+    tracked
+        ``(T, H, W)`` bool: the target as the user's pipeline saw it in every frame
+        (tracked, or given contours); the baselines see only these.
+    images
+        ``(T, H, W)`` the B-mode frames (for the NCC tracker).
+    truth
+        Frame → true mask; the scores' reference.
+    training, validation
+        Frame numbers of the two sets.
+    horizons, online_from
+        Online mode: horizons k (frames) and the frames t it predicts t + k from.
+    """
+    from hifumotion.prediction.baselines import hold_last, kalman_predict, ncc_track
+    from hifumotion.prediction.pipeline import online_predictions
+
+    pixel = float(pred.pixel_mm)
+    training, validation = [int(f) for f in training], [int(f) for f in validation]
+    scored = {f: pred.masks[f] for f in training + validation if f in pred.masks}
+    table = score_masks(scored, truth, pixel, training=training, validation=validation)
+    physics = {"training": summary(pred.masks, truth, pixel, training),
+               "validation": summary(pred.masks, truth, pixel, validation)}
+    seen = {f: tracked[f] for f in [0, *training]}
+    masks = {"no_motion": hold_last(seen, validation),
+             "kalman": kalman_predict(seen, validation, frame_interval_s, pixel)}
+    baselines = {name: summary(m, truth, pixel, validation) for name, m in masks.items()}
+
+    online: dict = {}
+    physics_online: dict = {}
+    n = len(tracked)
+    now = [int(t) for t in online_from]
+    if horizons and now:
+        physics_online = online_predictions(pred, spec, reference, tracked, list(horizons), now)
+        ncc = ncc_track(images, tracked[0])
+        for h in horizons:
+            targets = [t + h for t in now if t + h < n and t + h in physics_online[h] and t + h in truth]
+            entry: dict = {"horizon_frames": int(h), "horizon_ms": 1000.0 * h * frame_interval_s}
+            entry["physics"] = summary(physics_online[h], truth, pixel, targets)
+            entry["no_motion"] = summary({t + h: tracked[t] for t in now}, truth, pixel, targets)
+            entry["ncc"] = summary({t + h: ncc[t] for t in now if t in ncc}, truth, pixel, targets)
+            kalman = {}
+            for t in now:
+                if t + h in targets:
+                    past = {f: tracked[f] for f in range(max(0, t - 10), t + 1)}
+                    kalman.update(kalman_predict(past, [t + h], frame_interval_s, pixel))
+            entry["kalman"] = summary(kalman, truth, pixel, targets)
+            online[str(h)] = entry
+    return Evaluation(table, physics, baselines, online, masks, physics_online)
+
+
+def online_schedule(training, validation, horizons, n_frames: int, samples: int = 40) -> tuple[list[int], list[int]]:
+    """The frames t the online mode predicts from (about ``samples`` of them, from the first
+    training frame to the last validation frame less the shortest horizon) and every frame
+    the model must keep for it (t and t + k)."""
+    if not horizons:
+        return [], []
+    first, last = min(training), max(validation)
+    now = list(range(first, last - min(horizons) + 1, max(1, n_frames // samples)))
+    keep = sorted({f for t in now for h in [0, *horizons] if (f := t + h) < n_frames})
+    return now, keep
+
+
+__all__ = ["Evaluation", "evaluate", "summary", "online_schedule"]

@@ -1,0 +1,257 @@
+"""``report/report.html``: what a run found, for a person to read.
+
+:func:`write_report` takes a :class:`~hifumotion.workflow.pipeline.PipelineOutcome` and
+the run's other results (segmentation comparisons, timings) and writes the page and its
+PNGs into one folder: the segmentation comparison (the paper's Table 2, Figures 2–3),
+the reconstructed tissue, the fitted parameters with their uncertainty beside the truth
+(Table 3), per-frame DSC (Table 4) with the overlays (Fig. 4), the baselines, the online
+mode, the aim trajectory, the timings, and how to open the 3D output in ParaView and
+3D Slicer.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hifumotion.report import figures
+from hifumotion.report.html import figure, fmt, page, paragraph, table
+
+PARAMETER_ROWS = [
+    ("external_force_n", "external force F", "N"),
+    ("youngs_modulus_pa", "Young's modulus E", "Pa"),
+    ("poisson_ratio", "Poisson's ratio ν", "—"),
+    ("beta1_pa_s_pow", "β1", "Pa·s^β2"),
+    ("beta2", "β2", "—"),
+    ("force_over_youngs_m2", "F/E (what a push fixes)", "m²"),
+    ("beta1_over_youngs_s_pow", "β1/E", "s^β2"),
+]
+
+
+@dataclass
+class SegmentationResult:
+    """One segmentation comparison for the report (see :mod:`hifumotion.segmentation.compare`)."""
+
+    title: str
+    comparison: object                  # segmentation.compare.Comparison
+    figure2: Path
+    figure3: Path
+    note: str = ""
+
+
+@dataclass
+class ReportInputs:
+    """Everything :func:`write_report` draws on besides the pipeline's outcome."""
+
+    title: str = "hifumotion run"
+    segmentation: list[SegmentationResult] = field(default_factory=list)
+    timings_s: dict = field(default_factory=dict)
+    experiment_note: str = ""
+    experiment_facts: dict = field(default_factory=dict)
+    true_centroid_mm: np.ndarray | None = None     # (T, 2) the truth's section centroid per frame (twin)
+    links: dict = field(default_factory=dict)      # label -> path of output files worth opening
+
+
+def _rel(target: Path, folder: Path) -> str:
+    return Path(os.path.relpath(Path(target).resolve(), folder.resolve())).as_posix()
+
+
+def _copy(src: Path, folder: Path, name: str | None = None) -> str:
+    dst = folder / (name or Path(src).name)
+    if Path(src).resolve() != dst.resolve():
+        shutil.copyfile(src, dst)
+    return dst.name
+
+
+def _segmentation_parts(results: list[SegmentationResult], folder: Path) -> list[str]:
+    parts = [paragraph("Every method starts from the same initial contour on every image and is scored against "
+                       "the reference masks: DSC (higher is better), MSSD, Hausdorff distance and its 95th "
+                       "percentile in pixels (lower is better), and the time per image.")]
+    for i, r in enumerate(results):
+        cmp = r.comparison
+        rows = [[m.upper(), cmp.mean(m, "dsc"), cmp.mean(m, "mssd"), cmp.mean(m, "hausdorff"), cmp.mean(m, "hd95"),
+                 cmp.mean(m, "seconds")] for m in cmp.methods]
+        best = max(cmp.methods, key=lambda m: cmp.mean(m, "dsc"))
+        parts.append(f"<h3>{r.title}</h3>")
+        if r.note:
+            parts.append(paragraph(r.note))
+        parts.append(table(["method", "DSC", "MSSD (px²)", "Hausdorff (px)", "HD95 (px)", "s / image"], rows,
+                           f"Table 2 on {len(cmp.images)} images; best DSC: {best.upper()}"))
+        parts.append(figure(_copy(r.figure2, folder, f"segmentation_{i}_figure2.png"),
+                            "Figure 2: the segmentations (each method's contour over the image; reference in green)"))
+        parts.append(figure(_copy(r.figure3, folder, f"segmentation_{i}_figure3.png"),
+                            "Figure 3: the scores per image"))
+    return parts
+
+
+def _parameter_parts(outcome) -> list[str]:
+    from hifumotion.estimation.calibrate import recovered_parameters
+
+    cal = outcome.calibration
+    rep = cal.report()
+    truth = outcome.truth_parameters
+    recovered = recovered_parameters(rep, cal.parameters, truth) if truth else {}
+    truth_values = {}
+    if truth:
+        e = truth["youngs_modulus_pa"]
+        truth_values = {"external_force_n": truth["external_force_n"], "youngs_modulus_pa": e,
+                        "poisson_ratio": truth["poisson_ratio"], "beta1_pa_s_pow": truth["beta1_pa_s_pow"],
+                        "beta2": truth["beta2"], "force_over_youngs_m2": truth["external_force_n"] / e,
+                        "beta1_over_youngs_s_pow": truth["beta1_pa_s_pow"] / e}
+    rows = []
+    for key, label, unit in PARAMETER_ROWS:
+        entry = rep[key]
+        rel = recovered.get(key, {}).get("rel_error")
+        rows.append([label, unit, entry["value"], entry["std"], entry["determined"], truth_values.get(key),
+                     "—" if rel is None else f"{100 * rel:+.1f} %"])
+    parts = [table(["parameter", "unit", "fitted", "std. error", "determined by the data", "truth", "error"], rows,
+                   "Table 3: the fitted parameters")]
+    parts.append(paragraph(
+        f"Method: {cal.search.method if cal.search is not None else 'table1'}; {cal.runs} forward runs; "
+        f"training frames {cal.training_frames}. A quasi-static push is unchanged when F, E and β1 are scaled "
+        "together, so the force is held at its nominal value and the data are judged on F/E and β1/E. "
+        "'—' as an error: the data do not bound that direction."))
+    if cal.degeneracy:
+        rows = [[f"×{d['factor']:g}", d["cost_mm"]] for d in cal.degeneracy]
+        if rows:
+            parts.append(table(["F, E, β1 scaled by", "Σ S_t (mm)"], rows, "The scaling the push cannot see"))
+    return parts
+
+
+def _prediction_parts(outcome, truth: dict, folder: Path) -> list[str]:
+    from hifumotion.metrics import dice
+
+    ev = outcome.evaluation
+    rows = [[r["frame"], r["set"], r["dsc"], r["hd95_mm"], r["centroid_error_mm"]] for r in ev.table.rows]
+    parts = [paragraph(f"Predicted sections against the {outcome.truth_kind}: DSC, 95th-percentile Hausdorff "
+                       "distance and centroid error (where the focus would be aimed) per frame.")]
+    if outcome.truth_kind == "tracked contours":
+        parts.append(paragraph("No independent truth was given: the scores compare the prediction with the "
+                               "GLCV-tracked contours, which include the tracking's own error.", "note"))
+    frames = [r["frame"] for r in ev.table.rows]
+    baseline_curves = {}
+    for name, masks in ev.baseline_masks.items():
+        f = [fr for fr in outcome.validation if fr in masks and fr in truth]
+        baseline_curves[name] = (f, [dice(masks[fr], truth[fr]) for fr in f])
+    parts.append(figure(figures.dsc_per_frame(frames, [r["dsc"] for r in ev.table.rows], baseline_curves,
+                                              folder / "dsc_per_frame.png", outcome.training, outcome.validation).name,
+                        "Table 4 as a plot: DSC per frame, training then validation; baselines on the validation frames"))
+    parts.append(table(["frame", "set", "DSC", "HD95 (mm)", "centroid error (mm)"], rows, "Table 4: per frame"))
+    parts.append(figure(_copy(outcome.folders["scores"] / "overlays.png", folder),
+                        "Figure 4: true (green) and predicted (red) contours on the observed frames"))
+    return parts
+
+
+def _baseline_parts(outcome, folder: Path) -> list[str]:
+    ev = outcome.evaluation
+    v = ev.physics["validation"]
+    rows = [["physics (fitted model)", v.get("dsc_mean"), v.get("dsc_min"), v.get("hd95_mean_mm"),
+             v.get("centroid_mean_mm"), v.get("centroid_max_mm")]]
+    for name, s in ev.baselines.items():
+        rows.append([name.replace("_", " "), s.get("dsc_mean"), s.get("dsc_min"), s.get("hd95_mean_mm"),
+                     s.get("centroid_mean_mm"), s.get("centroid_max_mm")])
+    best = max(rows, key=lambda r: r[1] if r[1] is not None else -1)[0]
+    parts = [table(["method", "DSC mean", "DSC min", "HD95 mean (mm)", "centroid mean (mm)", "centroid max (mm)"],
+                   rows, f"Validation frames {outcome.validation}: best mean DSC — {best}")]
+    parts.append(paragraph("No motion holds the last training contour; the Kalman filter runs on the contour's "
+                           "centroid and radial shape, both from the same contours the physics was fitted to."))
+    if ev.online:
+        rows = []
+        for h, e in sorted(ev.online.items(), key=lambda kv: int(kv[0])):
+            rows.append([f"{e['horizon_frames']} frames ({e['horizon_ms']:.0f} ms)"]
+                        + [e[m].get("dsc_mean") for m in ("physics", "no_motion", "ncc", "kalman")]
+                        + [e[m].get("centroid_mean_mm") for m in ("physics", "no_motion", "ncc", "kalman")])
+        parts.append("<h3>Online mode</h3>")
+        parts.append(paragraph("At each frame t, knowing the frames up to t, predict frame t + k: the physics "
+                               "re-anchored on the tracked frame t, holding frame t, the NCC template tracker, and "
+                               "a Kalman filter over the last ten frames."))
+        parts.append(table(["horizon", "DSC physics", "DSC no motion", "DSC NCC", "DSC Kalman", "centroid physics (mm)",
+                            "centroid no motion (mm)", "centroid NCC (mm)", "centroid Kalman (mm)"], rows,
+                           "Online prediction error against the horizon"))
+        parts.append(figure(figures.online_horizons(ev.online, folder / "online.png").name,
+                            "Online mode: error against the horizon"))
+    return parts
+
+
+def _aim_parts(outcome, inputs: ReportInputs, folder: Path) -> list[str]:
+    pred = outcome.prediction
+    dt = outcome.calibration.spec.frame_interval_s
+    t = np.arange(len(pred.aim_mm)) * dt
+    shift = pred.aim_mm - pred.aim_plan_mm
+    true_shift = true_t = None
+    if inputs.true_centroid_mm is not None:
+        c = np.asarray(inputs.true_centroid_mm, float)[: len(pred.aim_mm)]
+        true_shift, true_t = c - c[0], np.arange(len(c)) * dt
+    png = figures.aim_trajectory(t, shift, folder / "aim.png", true_shift, true_t, outcome.validation[0] * dt)
+    rows = [[f, f * dt, shift[f, 0], shift[f, 1], float(np.hypot(*shift[f]))]
+            for f in outcome.validation if f < len(shift)]
+    return [paragraph("The planned focus is the target's centroid on frame 0; the model carries that material "
+                      "point. Its predicted shift tells the operator where to move the focus (image axes: x along "
+                      "the transducer, y in depth; mm). Every frame: prediction/aim.csv."),
+            figure(png.name, "Where to aim: the predicted shift of the planned focus"),
+            table(["frame", "time (s)", "shift x (mm)", "shift y (mm)", "|shift| (mm)"], rows,
+                  "Validation frames")]
+
+
+def _paraview_parts(links: dict, folder: Path) -> list[str]:
+    items = "".join(f'<li><a href="{_rel(p, folder)}">{label}</a></li>' for label, p in links.items() if Path(p).exists())
+    return [f"<ul>{items}</ul>",
+            "<p><b>ParaView</b>: File → Open → <code>prediction/tissue.pvd</code> (the fitted model's tissue "
+            "particles, every predicted frame, with <code>displacement_mm</code>), Apply; choose "
+            "<i>Point Gaussian</i> or <i>Points</i> as the representation and colour by "
+            "<code>displacement_magnitude_mm</code>; press Play. The twin's own particles are in "
+            "<code>experiment/truth/particles/frames.pvd</code>; the reconstructed surface is "
+            "<code>calibration/observation/tissue.vtp</code>.</p>"
+            "<p><b>3D Slicer</b>: drag <code>calibration/observation/tissue_volume.nii.gz</code> (the reconstructed "
+            "tissue as a label volume) and <code>tissue.stl</code> into Slicer; the time series is "
+            "<code>experiment/observed/frames.nii.gz</code> (a 2D+t volume; open it with the Sequences module).</p>"]
+
+
+def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: ReportInputs) -> Path:
+    """Write ``folder/report.html`` and its PNGs; return the page's path."""
+    from hifumotion.io.files import write_text
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    observed_masks = outcome.calibration.observation.frame_masks
+    truth = truth_masks if truth_masks is not None else {f: observed_masks[f] for f in range(len(observed_masks))}
+    v = outcome.evaluation.physics["validation"]
+    nm = outcome.evaluation.baselines["no_motion"]
+    won = (v.get("dsc_mean") or 0) > (nm.get("dsc_mean") or 0)
+    intro = [paragraph(inputs.experiment_note)] if inputs.experiment_note else []
+    intro.append(
+        f'<p>Validation frames {outcome.validation[0]}–{outcome.validation[-1]}: physics DSC mean '
+        f'<b>{fmt(v.get("dsc_mean"))}</b> (min {fmt(v.get("dsc_min"))}), centroid error '
+        f'{fmt(v.get("centroid_mean_mm"), 3)} mm; no motion {fmt(nm.get("dsc_mean"))} — '
+        f'<span class="{"good" if won else "bad"}">the physics {"beats" if won else "does not beat"} holding the '
+        f'last training contour</span>. Prediction took {fmt(outcome.predict_s, 3)} s, '
+        f'{fmt(outcome.realtime_ratio, 3)}× the validation window\'s duration.</p>')
+    sections = []
+    if inputs.segmentation:
+        sections.append(("segmentation", "Segmentation (Table 2, Figures 2–3)",
+                         _segmentation_parts(inputs.segmentation, folder)))
+    rec = outcome.calibration.observation.reconstruction
+    mesh_png = figures.mesh_picture(rec.mesh.vertices, rec.mesh.faces, folder / "tissue.png",
+                                    "reconstructed tissue (image mm)")
+    facts = [["volume (mm³)", rec.volume_mm3], ["sweep planes", len(outcome.calibration.observation.observed.sweep)],
+             ["model tissue particles", len(outcome.calibration.spec.tissue_mm)],
+             ["model particle spacing (mm)", outcome.calibration.spec.spacing_mm]]
+    facts += [[k, val] for k, val in inputs.experiment_facts.items()]
+    sections.append(("reconstruction", "Reconstructed tissue",
+                     [figure(mesh_png.name, "The tissue reconstructed from the GLCV-segmented sweep"),
+                      table(["", "value"], facts)]))
+    sections.append(("parameters", "Fitted parameters (Table 3)", _parameter_parts(outcome)))
+    sections.append(("prediction", "Prediction (Table 4, Figure 4)", _prediction_parts(outcome, truth, folder)))
+    sections.append(("baselines", "Against the baselines", _baseline_parts(outcome, folder)))
+    sections.append(("aim", "Where to aim", _aim_parts(outcome, inputs, folder)))
+    sections.append(("timings", "Timings", [table(["stage", "wall time (s)"],
+                                                   [[k, v] for k, v in inputs.timings_s.items()])]))
+    sections.append(("files", "Open the results (ParaView, 3D Slicer)", _paraview_parts(inputs.links, folder)))
+    return write_text(folder / "report.html", page(inputs.title, intro, sections))
+
+
+__all__ = ["write_report", "ReportInputs", "SegmentationResult"]

@@ -1,0 +1,145 @@
+"""The report's pictures (matplotlib, PNG, written atomically).
+
+Each function takes plain data and a path and returns the path; none needs a display.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+#: Colours of the methods in every plot (physics red as in Fig. 4; truth green).
+COLOURS = {"physics": "tab:red", "no_motion": "tab:grey", "kalman": "tab:blue", "ncc": "tab:purple",
+           "truth": "tab:green"}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: str | Path) -> Path:
+    from hifumotion.io.files import atomic_path
+
+    plt = _pyplot()
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    return path
+
+
+def mesh_picture(vertices_mm: np.ndarray, faces: np.ndarray, path: str | Path, title: str = "",
+                 views=((20, -60), (20, 30))) -> Path:
+    """The reconstructed surface seen from two sides, Lambert-shaded (light from the viewer's upper left).
+
+    Tank axes: x across, y up (drawn as the vertical axis), z along the sweep; mm."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    plt = _pyplot()
+    v = np.asarray(vertices_mm, float)[:, [0, 2, 1]]     # y up on the plot's vertical axis
+    tri = v[np.asarray(faces)]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    fig = plt.figure(figsize=(5.0 * len(views), 4.4))
+    lo, hi = v.min(0), v.max(0)
+    centre, half = (lo + hi) / 2, (hi - lo).max() / 2
+    for i, (elev, azim) in enumerate(views):
+        ax = fig.add_subplot(1, len(views), i + 1, projection="3d")
+        e, a = np.radians(elev), np.radians(azim)
+        light = np.array([np.cos(e) * np.cos(a - 0.6), np.cos(e) * np.sin(a - 0.6), np.sin(e + 0.5)])
+        shade = 0.25 + 0.75 * np.clip(np.abs(normals @ (light / np.linalg.norm(light))), 0, 1)
+        colours = np.column_stack([0.85 * shade, 0.45 * shade, 0.40 * shade, np.ones_like(shade)])
+        ax.add_collection3d(Poly3DCollection(tri, facecolors=colours, edgecolors="none", linewidths=0))
+        for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
+            setter(c - half, c + half)
+        ax.set_box_aspect((1, 1, 1))
+        ax.view_init(elev, azim)
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("z (mm)")
+        ax.set_zlabel("y (mm)")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def dsc_per_frame(frames, physics, baselines: dict, path: str | Path, training=(), validation=()) -> Path:
+    """Table 4 as a plot: the physics' DSC per frame, the baselines' on the validation frames."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 3.6))
+    if len(training) and len(validation):
+        half = 0.5 * (np.diff(sorted(training)).min() if len(training) > 1 else 1)
+        ax.axvspan(min(training) - half, max(training) + half, color="0.93", zorder=0)
+        ax.text(np.mean(training), 1.0, "training", ha="center", va="top", fontsize=9, transform=ax.get_xaxis_transform())
+        ax.text(np.mean(validation), 1.0, "validation", ha="center", va="top", fontsize=9,
+                transform=ax.get_xaxis_transform())
+    ax.plot(frames, physics, "o-", color=COLOURS["physics"], label="physics (fitted model)")
+    for name, (f, d) in baselines.items():
+        ax.plot(f, d, "s--", color=COLOURS.get(name, None), label=name.replace("_", " "), markersize=4)
+    ax.set_xlabel("frame")
+    ax.set_ylabel("DSC")
+    ax.legend(fontsize=8, loc="lower left")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def aim_trajectory(times_s, aim_shift_mm: np.ndarray, path: str | Path, true_shift_mm: np.ndarray | None = None,
+                   true_times_s=None, validation_from_s: float | None = None) -> Path:
+    """Where to aim: the predicted shift of the aim point from the plan (x, y in mm) against
+    time, beside the true section's centroid shift when known."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4))
+    shift = np.asarray(aim_shift_mm, float)
+    axes[0].plot(times_s, shift[:, 0], color=COLOURS["physics"], label="predicted x")
+    axes[0].plot(times_s, shift[:, 1], color=COLOURS["physics"], ls="--", label="predicted y (depth)")
+    if true_shift_mm is not None:
+        t = np.asarray(true_shift_mm, float)
+        axes[0].plot(true_times_s, t[:, 0], color=COLOURS["truth"], label="true centroid x")
+        axes[0].plot(true_times_s, t[:, 1], color=COLOURS["truth"], ls="--", label="true centroid y")
+    if validation_from_s is not None:
+        axes[0].axvline(validation_from_s, color="0.5", lw=0.8)
+    axes[0].set_xlabel("time (s)")
+    axes[0].set_ylabel("shift from the plan (mm)")
+    axes[0].legend(fontsize=7)
+    axes[0].grid(alpha=0.3)
+    axes[1].plot(shift[:, 0], shift[:, 1], color=COLOURS["physics"], label="predicted")
+    if true_shift_mm is not None:
+        axes[1].plot(t[:, 0], t[:, 1], color=COLOURS["truth"], label="true centroid")
+    axes[1].set_xlabel("x shift (mm)")
+    axes[1].set_ylabel("y shift (mm)")
+    axes[1].set_aspect("equal", adjustable="datalim")
+    axes[1].legend(fontsize=7)
+    axes[1].grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def online_horizons(online: dict, path: str | Path) -> Path:
+    """The online mode: DSC and centroid error against the horizon (ms), per method."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4))
+    entries = sorted(online.values(), key=lambda e: e["horizon_ms"])
+    ms = [e["horizon_ms"] for e in entries]
+    for name in ("physics", "no_motion", "ncc", "kalman"):
+        dsc = [e[name].get("dsc_mean", np.nan) for e in entries]
+        cen = [e[name].get("centroid_mean_mm", np.nan) for e in entries]
+        axes[0].plot(ms, dsc, "o-", color=COLOURS[name], label=name.replace("_", " "))
+        axes[1].plot(ms, cen, "o-", color=COLOURS[name], label=name.replace("_", " "))
+    axes[0].set_ylabel("DSC (mean)")
+    axes[1].set_ylabel("centroid error (mm, mean)")
+    for ax in axes:
+        ax.set_xlabel("horizon (ms)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+__all__ = ["mesh_picture", "dsc_per_frame", "aim_trajectory", "online_horizons"]

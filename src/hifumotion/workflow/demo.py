@@ -1,0 +1,198 @@
+"""``hifumotion demo``: the whole system on the built-in synthetic experiment, then the report.
+
+One documented order (each step's folder inside the output):
+
+1. ``experiment/`` — generate the synthetic experiment (:func:`~hifumotion.experiment.generate_twin`):
+   the sweep, the time series, the clicked contour (``observed/``) and the truth (``truth/``);
+2. ``segmentation/`` — the paper's comparison of the six level-set methods (Table 2, Figures
+   2–3) on planes of the twin's sweep against their true sections, and on the real images
+   with expert masks of ``../shared/data/ddti`` when present;
+3. the pipeline (:func:`~hifumotion.workflow.pipeline.run_pipeline`) on ``experiment/observed``:
+   GLCV sweep → 3D reconstruction → particle model → tracking → calibration on the
+   training frames → prediction of the validation frames → scores against the truth;
+4. ``report/report.html``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from hifumotion.console import log
+from hifumotion.workflow.pipeline import EstimationConfig, outcome_summary, run_pipeline
+
+Progress = Callable[[str, float], None]
+
+#: The estimation of the reduced presets (demo, small): the model at the twin's model size,
+#: searched at that resolution (no second, finer model), a short least-squares search —
+#: minutes on two cores. The default preset gets the paper's 4,399 particles and the full search.
+REDUCED_ESTIMATION = {"max_evaluations": 3}
+
+
+def demo_estimation(preset: str, model_particles: int, overrides: dict | None = None) -> EstimationConfig:
+    """The estimation settings of a demo on ``preset`` (see :data:`REDUCED_ESTIMATION`), with ``overrides``."""
+    base: dict = {}
+    if preset != "default":
+        base = {**REDUCED_ESTIMATION, "particles": model_particles, "search_particles": model_particles}
+    base.update(overrides or {})
+    if "particles" in (overrides or {}) and "search_particles" not in (overrides or {}):
+        base["search_particles"] = min(base.get("search_particles", 1000), base["particles"])
+    return EstimationConfig(**base)
+
+
+def default_dataset() -> Path | None:
+    """``../shared/data/ddti`` beside the source tree or the working directory, if present."""
+    here = Path(__file__).resolve()
+    for base in [Path.cwd(), *here.parents]:
+        candidate = base.parent / "shared" / "data" / "ddti"
+        if candidate.is_dir():
+            return candidate
+    return None
+
+
+def sweep_dataset(twin: str | Path, folder: str | Path, planes: int = 4, clicks: int = 8, error_mm: float = 0.6,
+                  seed: int = 0) -> Path:
+    """A segmentation dataset (``images/``, ``masks/``, ``init.json``) from a twin's sweep.
+
+    The ``planes`` sweep planes nearest the middle of the tissue, their true sections as
+    masks, and a clinician's rough clicks on each (``clicks`` points along the true boundary,
+    each off by a normal radial error of ``error_mm``) as the common initial contour."""
+    from hifumotion.contour import Contour
+    from hifumotion.experiment.twin import clinician_contour
+    from hifumotion.io import write_json
+    from hifumotion.io.raster import read_raster_array
+    from hifumotion.io.writers import read_mask, write_mask_png
+    from hifumotion.io.files import atomic_path
+
+    twin, folder = Path(twin), Path(folder)
+    setup = json.loads((twin / "observed" / "setup.json").read_text())
+    pixel = float(setup["imaging"]["pixel_mm"])
+    masks = sorted((twin / "truth" / "sweep").glob("slice_*.png"))
+    area = np.array([(read_raster_array(p)[0] > 0).sum() for p in masks])   # end planes are empty
+    tissue = np.flatnonzero(area > 0.25 * area.max())
+    middle = tissue[np.argsort(np.abs(tissue - tissue.mean()))[:planes]]
+    rng = np.random.default_rng(seed)
+    init = {}
+    import shutil
+
+    for i in sorted(middle):
+        name = masks[i].name
+        truth = read_mask(masks[i])
+        contour = Contour.from_mask(truth, pixel)
+        points = clinician_contour(contour.points_px * pixel, clicks, error_mm, rng) / pixel
+        init[name] = {"points": points.round(2).tolist()}
+        (folder / "images").mkdir(parents=True, exist_ok=True)
+        with atomic_path(folder / "images" / name) as tmp:
+            shutil.copyfile(twin / "observed" / "sweep" / name, tmp)
+        write_mask_png(folder / "masks" / name, truth)
+    write_json(folder / "init.json", init)
+    return folder
+
+
+@dataclass
+class DemoSettings:
+    """What ``hifumotion demo`` runs (every field has a default)."""
+
+    preset: str = "demo"                     # twin preset: demo (minutes), small (tests), default (the paper's size)
+    seed: int = 0
+    dataset: Path | None = None              # real images with expert masks; default ../shared/data/ddti
+    dataset_images: int = 6
+    sweep_planes: int = 4
+    estimation_overrides: dict | None = None     # EstimationConfig fields on top of demo_estimation()
+
+
+def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | None = None) -> dict:
+    """Steps 1–4 of the module docstring into ``out`` (an output folder being written)."""
+    from hifumotion.experiment import generate_twin, twin_config
+    from hifumotion.io.dataset import Dataset, load_dataset
+    from hifumotion.report.build import ReportInputs, SegmentationResult, write_report
+    from hifumotion.scoring import read_frame_masks
+    from hifumotion.segmentation import METHODS
+    from hifumotion.segmentation.compare import compare_methods, write_comparison
+
+    tell = progress or (lambda stage, fraction: None)
+    cfg = twin_config(settings.preset, seed=settings.seed)
+    twin = out / "experiment"
+    with record.stage("experiment: generate the synthetic twin"):
+        generate_twin(cfg, twin, progress=tell)
+    truth_params = json.loads((twin / "truth" / "parameters.json").read_text())
+
+    segmentation = []
+    methods = list(METHODS)
+    with record.stage("segmentation: six methods on the twin's sweep"):
+        data = load_dataset(sweep_dataset(twin, out / "segmentation" / "sweep_dataset", settings.sweep_planes,
+                                          seed=settings.seed))
+        cmp = compare_methods(data, methods, "points", progress=_items(tell, "segmentation (sweep)"))
+        paths = write_comparison(cmp, out / "segmentation", tag="_sweep")
+        segmentation.append(SegmentationResult(
+            f"The twin's sweep: {len(data)} planes, simulated B-mode against the true sections", cmp,
+            paths["figure2"], paths["figure3"], "Initial contour: a clinician's 8 rough clicks on each plane."))
+    folder = settings.dataset or default_dataset()
+    if folder is None:
+        log.warning("../shared/data/ddti not found: the segmentation comparison runs on the twin's sweep only")
+    else:
+        with record.stage("segmentation: six methods on real images"):
+            real = load_dataset(folder)
+            real = Dataset(real.root, real.items[: max(settings.dataset_images, 1)])
+            cmp = compare_methods(real, methods, "points", progress=_items(tell, "segmentation (real images)"))
+            paths = write_comparison(cmp, out / "segmentation", tag=f"_{Path(folder).name}")
+            segmentation.append(SegmentationResult(
+                f"Real ultrasound images with expert masks ({Path(folder).name}, {len(real)} images)", cmp,
+                paths["figure2"], paths["figure3"], "Initial contour: the dataset's clicked points (init.json)."))
+
+    estimation = demo_estimation(settings.preset, cfg.resolution.model_tissue_particles, settings.estimation_overrides)
+    record.config["estimation"] = estimation.model_dump(mode="json")
+    truth = read_frame_masks(twin / "truth")
+    outcome = run_pipeline(twin / "observed", out, estimation, truth_masks=truth, truth_kind="twin's true sections",
+                           truth_parameters=truth_params, record=record, progress=tell)
+    motion = json.loads((twin / "truth" / "motion.json").read_text())
+    with record.stage("report"):
+        inputs = ReportInputs(
+            title="hifumotion demo: the synthetic experiment end to end",
+            segmentation=segmentation, timings_s=dict(record.timings_s),
+            experiment_note=(f"A synthetic experiment (preset '{settings.preset}', seed {settings.seed}) stands in for "
+                             f"the paper's cow tissue: {cfg.imaging.frames} frames at {cfg.imaging.frame_rate_hz:g} Hz, "
+                             f"a {cfg.bar.force_n:g} N push by a rigid bar, tissue E = "
+                             f"{cfg.tissue.youngs_modulus_pa:g} Pa, ν = {cfg.tissue.poisson_ratio:g}. The truth "
+                             f"has {cfg.resolution.truth_particle_factor:g}× the fitted model's particles."),
+            experiment_facts={"truth tissue particles": truth_params["facts"]["truth_tissue_particles"],
+                              "true blob volume (mm³)": truth_params["facts"]["blob_volume_mm3"]},
+            true_centroid_mm=np.asarray(motion["centroid_mm"], float),
+            links=_links(out))
+        page = write_report(out / "report", outcome, truth, inputs)
+    summary = outcome_summary(outcome)
+    summary["report"] = page.relative_to(out).as_posix()
+    summary["segmentation_mean_dsc"] = {r.title: {m: round(r.comparison.mean(m, "dsc"), 4) for m in methods}
+                                        for r in segmentation}
+    return summary
+
+
+def _links(out: Path) -> dict:
+    return {"prediction/tissue.pvd — the fitted model's tissue, predicted frames (ParaView)": out / "prediction" / "tissue.pvd",
+            "experiment/truth/particles/frames.pvd — the twin's particles (ParaView)":
+                out / "experiment" / "truth" / "particles" / "frames.pvd",
+            "calibration/observation/tissue.vtp — reconstructed surface (ParaView)":
+                out / "calibration" / "observation" / "tissue.vtp",
+            "calibration/observation/tissue_volume.nii.gz — reconstructed volume (3D Slicer)":
+                out / "calibration" / "observation" / "tissue_volume.nii.gz",
+            "calibration/parameters.json — fitted parameters": out / "calibration" / "parameters.json",
+            "prediction/aim.csv — where to aim, every frame": out / "prediction" / "aim.csv",
+            "scores/table4.csv — per-frame scores": out / "scores" / "table4.csv"}
+
+
+def _items(tell: Progress, stage: str):
+    """A ``progress(items, description, total)`` iterator wrapper feeding the stage bars."""
+    def wrap(items, description=None, total=None):
+        items = list(items)
+        for i, item in enumerate(items):
+            tell(stage, i / max(len(items), 1))
+            yield item
+        tell(stage, 1.0)
+    return wrap
+
+
+__all__ = ["DemoSettings", "run_demo", "sweep_dataset", "default_dataset", "demo_estimation"]

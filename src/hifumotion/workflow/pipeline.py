@@ -1,0 +1,171 @@
+"""The whole system on one observed experiment, in one documented order.
+
+:func:`run_pipeline` is what ``hifumotion demo`` (on the built-in synthetic experiment)
+and ``hifumotion run CONFIG.toml`` (on a user's files) share:
+
+1. **observe** (:func:`~hifumotion.estimation.prepare.prepare`): segment the sweep with
+   GLCV, reconstruct the tissue in 3D, track the time series from the clicked contour
+   (or take the user's training contours);
+2. **calibrate** (:func:`~hifumotion.estimation.calibrate.calibrate`) on the training
+   frames → ``calibration/`` (``parameters.json``, the model, the reconstruction);
+3. **predict** the training and validation frames with the fitted model, the online
+   mode's frames and the aim point of every frame → ``prediction/`` (masks, contours,
+   ``aim.csv``, ``online.csv``, ``tissue.pvd`` for ParaView);
+4. **score** the physics and the baselines (no motion, Kalman, NCC online) against the
+   truth — a twin's, or the user's expert masks; without either, against the tracked
+   contours, and the report says so → ``scores/`` (Table 4 CSV/JSON, overlays).
+
+Each step's output folder is written inside ``out``, which the caller created with
+:func:`~hifumotion.io.output_folder` (new, atomic).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Literal
+
+import numpy as np
+from pydantic import Field
+
+from hifumotion.config import ConfigModel
+
+Progress = Callable[[str, float], None]
+
+
+class EstimationConfig(ConfigModel):
+    """How to calibrate and predict (``[estimation]`` of a run configuration)."""
+
+    method: Literal["least_squares", "cmaes", "table1"] = Field(
+        "least_squares", description="estimator: bounded least squares, CMA-ES, or the paper's Table 1 algorithm")
+    training_frames: str | None = Field(
+        None, description="training frames, '20,30,40' or '20:101:10' (default: the paper's protocol scaled to the series)")
+    validation_frames: str | None = Field(
+        None, description="validation frames, same forms (default: the paper's protocol scaled to the series)")
+    force_n: float = Field(0.25, gt=0, description="nominal pushing force in N (the data fix only F/E)")
+    particles: int = Field(4399, ge=100, description="tissue particles of the fitted model (the paper: 4,399)")
+    search_particles: int = Field(1000, ge=100, description="tissue particles of the coarser model the search runs on")
+    max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
+    horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
+    workers: int | None = Field(None, ge=1, description="Dask worker processes of the local cluster (default: the cores)")
+    scheduler_address: str | None = Field(None, description="an existing Dask cluster, tcp://host:8786")
+
+
+@dataclass
+class PipelineOutcome:
+    """What :func:`run_pipeline` computed and where it wrote it."""
+
+    calibration: object             # estimation.calibrate.Calibration
+    prediction: object              # prediction.physics.Prediction
+    evaluation: object              # prediction.evaluate.Evaluation
+    truth_kind: str                 # "twin", "expert masks" or "tracked contours"
+    training: list[int]
+    validation: list[int]
+    predict_s: float
+    folders: dict = field(default_factory=dict)
+    truth_parameters: dict | None = None
+
+    @property
+    def realtime_ratio(self) -> float:
+        """Prediction wall time over the validation window's duration (< 1: faster than real time)."""
+        spec = self.calibration.spec
+        window = (self.validation[-1] - self.validation[0]) * spec.frame_interval_s
+        return self.predict_s / window if window > 0 else float("nan")
+
+
+def run_pipeline(observed_dir: str | Path, out: str | Path, settings: EstimationConfig | None = None,
+                 contours_csv: str | Path | None = None, truth_masks: dict | None = None,
+                 truth_kind: str = "expert masks", truth_parameters: dict | None = None,
+                 record=None, progress: Progress | None = None) -> PipelineOutcome:
+    """Steps 1–4 of the module docstring on ``observed_dir``; outputs under ``out``.
+
+    ``truth_masks`` (frame → bool mask) is what the scores are measured against; a twin's
+    ``truth_parameters`` (``truth/parameters.json``) puts the truth beside the fit.
+    ``record`` (a :class:`~hifumotion.run_info.RunRecord`) gets each step's time.
+    """
+    from contextlib import nullcontext
+
+    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate
+    from hifumotion.estimation.model import ModelSettings
+    from hifumotion.estimation.prepare import prepare
+    from hifumotion.estimation.protocol import default_frames, parse_frames
+    from hifumotion.estimation.store import save_calibration
+    from hifumotion.experiment.observed import load_observed
+    from hifumotion.io import write_json
+    from hifumotion.io.files import write_text
+    from hifumotion.prediction.evaluate import evaluate, online_schedule
+    from hifumotion.prediction.pipeline import online_csv, predict_calibrated, write_particles, write_prediction
+    from hifumotion.scoring import overlay_figure
+
+    s = settings or EstimationConfig()
+    out = Path(out)
+    tell = progress or (lambda stage, fraction: None)
+    stage = record.stage if record is not None else (lambda name: nullcontext())
+    observed = load_observed(observed_dir)
+    n = len(observed.frames)
+    auto_train, auto_valid = default_frames(n)
+    training = parse_frames(s.training_frames, n, "estimation.training_frames") or auto_train
+    validation = parse_frames(s.validation_frames, n, "estimation.validation_frames") or auto_valid
+
+    with stage("observe: segment sweep, reconstruct, track"):
+        observation = prepare(observed, contours_csv, progress=tell)
+    with stage("calibrate"):
+        (out / "calibration").mkdir(parents=True, exist_ok=True)
+        cal = calibrate(observation, CalibrationSettings(
+            method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
+            model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations,
+            workers=s.workers, scheduler_address=s.scheduler_address),
+            log_path=out / "calibration" / "search_log.jsonl", progress=tell)
+        save_calibration(cal, out / "calibration", observed_dir)
+
+    with stage("predict"):
+        tell("predict", 0.0)
+        now, keep = online_schedule(training, validation, s.horizons_frames, n)
+        reference = observation.reference_shape()
+        t0 = time.perf_counter()
+        pred = predict_calibrated(cal.spec, cal.parameters, reference, sorted(set(training) | set(validation)), keep)
+        predict_s = time.perf_counter() - t0
+        folder = out / "prediction"
+        write_prediction(folder, pred, sorted(set(training) | set(validation)), observed.frame_interval_s)
+        write_particles(folder, pred, observed.frame_interval_s)
+        tell("predict", 1.0)
+
+    with stage("score"):
+        if truth_masks is None:
+            truth_masks = {f: observation.frame_masks[f] for f in range(n)}
+            truth_kind = "tracked contours"
+        ev = evaluate(pred, cal.spec, reference, observation.frame_masks, observed.frames, truth_masks,
+                      training, validation, observed.frame_interval_s, s.horizons_frames, now)
+        if ev.online_masks:
+            write_text(folder / "online.csv", online_csv(ev.online_masks, observation.frame_masks, pred.pixel_mm,
+                                                         observed.frame_interval_s))
+        scores = out / "scores"
+        write_text(scores / "table4.csv", ev.table.to_csv())
+        write_json(scores / "scores.json", {"truth": truth_kind, "pixel_mm": pred.pixel_mm,
+                                            "training_frames": training, "validation_frames": validation,
+                                            **ev.as_dict()})
+        images = {f: observed.frames[f] for f in training + validation}
+        overlay_figure(images, truth_masks, pred.masks, training + validation, scores / "overlays.png")
+        write_json(folder / "prediction.json", {
+            "frames": sorted(pred.masks), "parameters": cal.parameters.as_dict(), "seconds": predict_s,
+            "validation_window_s": (validation[-1] - validation[0]) * observed.frame_interval_s})
+    outcome = PipelineOutcome(cal, pred, ev, truth_kind, training, validation, predict_s,
+                              {"calibration": out / "calibration", "prediction": folder, "scores": scores},
+                              truth_parameters)
+    return outcome
+
+
+def outcome_summary(o: PipelineOutcome) -> dict:
+    """The figures a run records (``run_info.json``) and prints."""
+    v = o.evaluation.physics["validation"]
+    out = {"truth": o.truth_kind, "validation_dsc_mean": v.get("dsc_mean"), "validation_dsc_min": v.get("dsc_min"),
+           "validation_centroid_mean_mm": v.get("centroid_mean_mm"),
+           "no_motion_validation_dsc_mean": o.evaluation.baselines["no_motion"].get("dsc_mean"),
+           "kalman_validation_dsc_mean": o.evaluation.baselines["kalman"].get("dsc_mean"),
+           "calibration_runs": o.calibration.runs, "predict_s": o.predict_s,
+           "predict_over_realtime": o.realtime_ratio, "parameters": o.calibration.parameters.as_dict()}
+    return {k: (round(v, 5) if isinstance(v, float) and np.isfinite(v) else v) for k, v in out.items()}
+
+
+__all__ = ["EstimationConfig", "PipelineOutcome", "run_pipeline", "outcome_summary"]

@@ -1,0 +1,149 @@
+"""The whole system end to end: ``hifumotion demo`` and ``hifumotion run`` as a user runs them."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from hifumotion.estimation.protocol import default_frames
+from hifumotion.report.html import figure, missing_files, page, referenced_files
+from hifumotion.workflow.user_run import EXAMPLE, RunConfig
+
+CLI = [sys.executable, "-m", "hifumotion"]
+
+
+def _cli(*args: str, timeout: int = 600) -> subprocess.CompletedProcess:
+    return subprocess.run(CLI + list(args), capture_output=True, text=True, timeout=timeout)
+
+
+def test_missing_files_names_exactly_the_pictures_that_are_not_there(tmp_path):
+    (tmp_path / "a.png").write_bytes(b"png")
+    html = page("t", [], [("s", "S", [figure("a.png", "here"), figure("b.png", "gone"),
+                                      '<a href="https://example.org/x.png">web</a><a href="#s">anchor</a>'])])
+    (tmp_path / "report.html").write_text(html)
+    assert referenced_files(html) == ["a.png", "b.png"]
+    assert missing_files(tmp_path / "report.html") == ["b.png"]
+
+
+def test_the_printed_example_configuration_is_valid():
+    cfg = RunConfig.model_validate(tomllib.loads(EXAMPLE))
+    assert cfg.estimation.training_frames == "20:101:10" and cfg.bar.tip_at_rest_mm[1] == 19.0
+    assert default_frames(200) == ([*range(20, 101, 10)], [*range(110, 191, 10)])
+
+
+def test_run_config_mistakes_are_one_line_errors_naming_the_field(tmp_path):
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(EXAMPLE.replace("[geometry]", "[geometri]"))
+    proc = _cli("run", str(cfg), "-o", str(tmp_path / "out"), timeout=60)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert "geometr" in proc.stderr and "run.toml" in proc.stderr
+    cfg.write_text(EXAMPLE)   # valid, but its files do not exist here
+    proc = _cli("run", str(cfg), "-o", str(tmp_path / "out"), timeout=60)
+    assert proc.returncode == 2 and "sweep" in proc.stderr and "no such file" in proc.stderr
+    assert not (tmp_path / "out").exists()          # a failed run leaves nothing behind
+
+
+def _check_outputs(out: Path, n_frames: int, pictures_at_least: int) -> dict:
+    """Files present and readable; returns the run's summary."""
+    info = json.loads((out / "run_info.json").read_text())
+    assert info["timings_s"] and all(v >= 0 for v in info["timings_s"].values())
+    report = out / "report" / "report.html"
+    assert missing_files(report) == []
+    html = report.read_text()
+    pictures = [r for r in referenced_files(html) if r.endswith(".png")]
+    assert len(pictures) >= pictures_at_least      # tissue, DSC per frame, overlays, aim (+ online, segmentation)
+    for heading in ("Table 3", "Table 4", "Figure 4", "Where to aim", "Timings", "ParaView"):
+        assert heading in html
+    params = json.loads((out / "calibration" / "parameters.json").read_text())["parameters"]
+    assert params["youngs_modulus_pa"]["value"] > 0 and 0 < params["poisson_ratio"]["value"] < 0.5
+    train, valid = default_frames(n_frames)
+    with open(out / "scores" / "table4.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["frame"]) for r in rows] == train + valid
+    aim = np.genfromtxt(out / "prediction" / "aim.csv", delimiter=",", names=True)
+    assert len(aim) == max(valid) + 1 and abs(aim["shift_mm"][0]) < 1e-9
+    pvd = (out / "prediction" / "tissue.pvd").read_text()
+    vtus = [line.split('file="')[1].split('"')[0] for line in pvd.splitlines() if "file=" in line]
+    assert len(vtus) >= len(train + valid)
+    first = meshio.read(out / "prediction" / vtus[0])
+    assert len(first.points) >= 100 and "displacement_mm" in first.point_data
+    return info["summary"]
+
+
+@pytest.mark.slow
+def test_demo_runs_the_whole_system_on_a_small_twin(tmp_path, shared_data_or_none):
+    out = tmp_path / "demo"
+    args = ["demo", "--preset", "small", "--seed", "2", "--particles", "200", "--max-evaluations", "1",
+            "--workers", "1", "-o", str(out)]
+    if shared_data_or_none is not None:
+        args += ["--dataset", str(shared_data_or_none / "ddti"), "--images", "1"]
+    proc = _cli(*args)
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    assert "report.html" in proc.stdout                  # it tells the user where to look
+    summary = _check_outputs(out, 40, 7)
+    # real outcomes against the twin's truth (independent of the fit): a floor, not the target
+    assert summary["truth"] == "twin's true sections"
+    assert summary["validation_dsc_mean"] > 0.85 and summary["validation_centroid_mean_mm"] < 1.5
+    # the six methods ran on the twin's sweep against its true sections; GLCV segments it
+    seg = next(v for k, v in summary["segmentation_mean_dsc"].items() if "sweep" in k)
+    assert set(seg) == {"gac", "cv", "lcv", "rsf", "mslcv", "glcv"} and seg["glcv"] > 0.85
+    assert (out / "experiment" / "truth" / "parameters.json").is_file()
+    assert (out / "calibration" / "observation" / "tissue_volume.nii.gz").is_file()
+
+
+@pytest.mark.slow
+def test_run_on_user_files_reassembles_the_experiment(small_twin, tmp_path):
+    folder, _ = small_twin
+    setup = json.loads((folder / "observed" / "setup.json").read_text())
+    im = setup["imaging"]
+    z = im["sweep_z_mm"]
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(f'''
+[sweep]
+path = "{folder / 'observed' / 'sweep'}"
+spacing_mm = {im['pixel_mm']}
+gap_mm = {z[1] - z[0]}
+first_z_mm = {z[0]}
+[frames]
+path = "{folder / 'observed' / 'frames.nii.gz'}"
+[initial_contour]
+path = "{folder / 'observed' / 'initial_contour.csv'}"
+[geometry]
+row0_col0_mm = {list(im['row0_col0_mm'])}
+frames_plane_z_mm = {im['frames_plane_z_mm']}
+[tank]
+size_mm = {list(setup['tank']['size_mm'])}
+water_depth_mm = {setup['tank']['water_depth_mm']}
+[bar]
+tip_at_rest_mm = {list(setup['bar']['tip_at_rest_mm'])}
+force_ramp_s = {setup['bar']['force_ramp_s']}
+[estimation]
+particles = 200
+search_particles = 200
+max_evaluations = 1
+horizons_frames = []
+workers = 1
+[truth]
+masks = "{folder / 'truth' / 'frames'}"
+''')
+    out = tmp_path / "results"
+    proc = _cli("run", str(cfg), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    # the assembled experiment is the twin's own: same geometry, timing and pictures
+    assembled = json.loads((out / "observed" / "setup.json").read_text())
+    assert np.allclose(assembled["imaging"]["sweep_z_mm"], z)
+    assert assembled["frame_interval_s"] == pytest.approx(setup["frame_interval_s"])
+    import imageio.v3 as iio
+
+    a, b = iio.imread(out / "observed" / "frames" / "frame_0010.png"), iio.imread(folder / "observed" / "frames" / "frame_0010.png")
+    assert np.abs(a.astype(int) - b.astype(int)).max() <= 1
+    summary = _check_outputs(out, setup["frames"], 4)
+    assert summary["truth"] == "expert masks" and summary["validation_dsc_mean"] > 0.85
