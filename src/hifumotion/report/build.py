@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from hifumotion.report import figures
-from hifumotion.report.html import figure, fmt, page, paragraph, table
+from hifumotion.report.html import esc, figure, fmt, page, paragraph, table
 
 PARAMETER_ROWS = [
     ("external_force_n", "external force F", "N"),
@@ -76,7 +76,7 @@ def _segmentation_parts(results: list[SegmentationResult], folder: Path) -> list
         rows = [[m.upper(), cmp.mean(m, "dsc"), cmp.mean(m, "mssd"), cmp.mean(m, "hausdorff"), cmp.mean(m, "hd95"),
                  cmp.mean(m, "seconds")] for m in cmp.methods]
         best = max(cmp.methods, key=lambda m: cmp.mean(m, "dsc"))
-        parts.append(f"<h3>{r.title}</h3>")
+        parts.append(f"<h3>{esc(r.title)}</h3>")
         if r.note:
             parts.append(paragraph(r.note))
         parts.append(table(["method", "DSC", "MSSD (px²)", "Hausdorff (px)", "HD95 (px)", "s / image"], rows,
