@@ -88,7 +88,7 @@ def predict(
     online: Optional[str] = typer.Option(None, "--online", help="Online mode: horizons in frames, e.g. '4,6,8' — at each frame t predict t + k from the tracked frames up to t (online.csv)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
-    """Predict the imaging plane's contours with the fitted model: frames/frame_NNNN.png, contours.csv, aim.csv."""
+    """Predict the imaging plane's contours with the fitted model: frames/frame_NNNN.png, contours.csv, aim.csv, tissue.pvd."""
     import time
 
     from hifumotion.console import StageBars
@@ -98,7 +98,7 @@ def predict(
 
     from hifumotion.io import output_folder, write_json
     from hifumotion.io.files import write_text
-    from hifumotion.prediction.pipeline import predict_calibrated, write_prediction
+    from hifumotion.prediction.pipeline import predict_calibrated, write_particles, write_prediction
     from hifumotion.run_info import RunRecord
 
     spec, k, reference, meta = load_calibration(calibration_dir)
@@ -129,6 +129,7 @@ def predict(
                     spec.frame_interval_s))
         with record.stage("write"):
             write_prediction(out, pred, wanted, spec.frame_interval_s)
+            write_particles(out, pred, spec.frame_interval_s)
             window = (max(wanted) - min(valid)) * spec.frame_interval_s if max(wanted) > min(valid) else None
             write_json(out / "prediction.json", {
                 "frames": wanted, "parameters": k.as_dict(), "seconds": seconds,

@@ -34,6 +34,15 @@ def _csv(path: Path, header: str, rows: np.ndarray) -> None:
     write_text(path, header + "\n" + body + "\n")
 
 
+def _provenance(observed_dir: str | Path, folder: Path) -> str:
+    """Where the observation came from: relative to the calibration when both are in one
+    output folder (which is written under a temporary name and then renamed), else absolute."""
+    import os
+
+    obs, root = Path(observed_dir).resolve(), folder.resolve()
+    return Path(os.path.relpath(obs, root)).as_posix() if obs.is_relative_to(root.parent) else str(obs)
+
+
 def save_calibration(cal, folder: str | Path, observed_dir: str | Path, extra: dict | None = None) -> dict:
     """Write a :class:`~hifumotion.estimation.calibrate.Calibration` into ``folder``."""
     from hifumotion.config import dump_toml
@@ -71,7 +80,7 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path, extra: d
     summary = {
         "description": "Parameters fitted by hifumotion calibrate (SI). 'determined' says whether the training "
                        "frames fix the value; E and β1 are at the nominal force (only F/E and β1/E are seen).",
-        "observed": str(Path(observed_dir).resolve()),
+        "observed": _provenance(observed_dir, folder),
         "parameters": cal.report(),
         "training_frames": cal.training_frames,
         "frame_interval_s": spec.frame_interval_s,

@@ -129,6 +129,9 @@ def run_pipeline(observed_dir: str | Path, out: str | Path, settings: Estimation
         folder = out / "prediction"
         write_prediction(folder, pred, sorted(set(training) | set(validation)), observed.frame_interval_s)
         write_particles(folder, pred, observed.frame_interval_s)
+        write_json(folder / "prediction.json", {
+            "frames": sorted(pred.masks), "parameters": cal.parameters.as_dict(), "seconds": predict_s,
+            "validation_window_s": (validation[-1] - validation[0]) * observed.frame_interval_s})
         tell("predict", 1.0)
 
     with stage("score"):
@@ -147,9 +150,6 @@ def run_pipeline(observed_dir: str | Path, out: str | Path, settings: Estimation
                                             **ev.as_dict()})
         images = {f: observed.frames[f] for f in training + validation}
         overlay_figure(images, truth_masks, pred.masks, training + validation, scores / "overlays.png")
-        write_json(folder / "prediction.json", {
-            "frames": sorted(pred.masks), "parameters": cal.parameters.as_dict(), "seconds": predict_s,
-            "validation_window_s": (validation[-1] - validation[0]) * observed.frame_interval_s})
     outcome = PipelineOutcome(cal, pred, ev, truth_kind, training, validation, predict_s,
                               {"calibration": out / "calibration", "prediction": folder, "scores": scores},
                               truth_parameters)
