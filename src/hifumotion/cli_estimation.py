@@ -25,6 +25,7 @@ def calibrate(
     max_evaluations: int = typer.Option(8, "--max-evaluations", help="Least squares: residual evaluations (each with a p-run Jacobian)."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Dask worker processes of the local cluster (default: the cores)."),
     scheduler_address: Optional[str] = typer.Option(None, "--scheduler-address", help="Use an existing Dask cluster (tcp://host:8786)."),
+    boundary_offset: float = typer.Option(0.0, "--boundary-offset", help="How far outside the true boundary your system's segmentations lie (mm, from a phantom of known size); masks move inwards by it."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A search_log.jsonl of an interrupted calibration: its runs are not repeated."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
@@ -54,7 +55,7 @@ def calibrate(
     record = RunRecord("calibrate", config={"observed": str(observed_dir), "method": method, "training": frames,
                                             "contours": None if contours is None else str(contours), "force_n": force,
                                             "particles": particles, "search_particles": search_particles,
-                                            "max_evaluations": max_evaluations,
+                                            "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset,
                                             "workers": workers, "scheduler_address": scheduler_address})
     with output_folder(output, overwrite) as out:
         log = out / "search_log.jsonl"
@@ -62,7 +63,7 @@ def calibrate(
             shutil.copyfile(resume, log)
         with StageBars() as progress:
             with record.stage("observe"):
-                observation = prepare(observed, contours, progress=progress)
+                observation = prepare(observed, contours, progress=progress, boundary_offset_mm=boundary_offset)
             with record.stage("calibrate"):
                 cal = run_calibration(observation, settings, log_path=log, progress=progress)
         with record.stage("write"):

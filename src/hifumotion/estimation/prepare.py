@@ -153,8 +153,15 @@ def read_user_contours(path: str | Path, observed: Observed) -> dict[int, np.nda
 
 
 def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
-            progress: Progress | None = None) -> Observation:
-    """Segment, reconstruct and track an observed experiment (module docstring)."""
+            progress: Progress | None = None, boundary_offset_mm: float = 0.0) -> Observation:
+    """Segment, reconstruct and track an observed experiment (module docstring).
+
+    ``boundary_offset_mm``: how far outside the true boundary the imaging system's
+    segmentations lie, measured on a phantom of known size
+    (:func:`~hifumotion.experiment.boundary_offset.measure_boundary_offset`); the sweep's and
+    the tracked frames' masks are moved inwards by it (the user's own contours are not).
+    """
+    from hifumotion.experiment.boundary_offset import shift_boundary
     from hifumotion.segmentation import track
 
     tell = progress or (lambda stage, fraction: None)
@@ -172,6 +179,8 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     timings["segment_sweep_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
+    if boundary_offset_mm:
+        sweep.masks = np.stack([shift_boundary(m, boundary_offset_mm, px) if m.any() else m for m in sweep.masks])
     if sweep.present.sum() < 2:
         raise InputError("the sweep's segmentation holds the tissue in fewer than two planes; "
                          "check the initial contour", "sweep")
@@ -190,6 +199,8 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     frame_plane = _plane_at(offset, observed, z_frames)
     masks = track(observed.frames, init, method, spacing=px,
                   exclude=known_solids(frame_plane, observed.setup)).masks
+    if boundary_offset_mm:
+        masks = np.stack([shift_boundary(m, boundary_offset_mm, px) for m in masks])
     for frame, m in given.items():
         masks[frame] = m
     source = str(contours_csv) if given else method

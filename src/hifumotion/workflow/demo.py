@@ -7,10 +7,12 @@ One documented order (each step's folder inside the output):
 2. ``segmentation/`` — the paper's comparison of the six level-set methods (Table 2, Figures
    2–3) on planes of the twin's sweep against their true sections, and on the real images
    with expert masks of ``../shared/data/ddti`` when present;
-3. the pipeline (:func:`~hifumotion.workflow.pipeline.run_pipeline`) on ``experiment/observed``:
+3. the imaging system's boundary offset, measured on a simulated gel phantom of known shape
+   imaged with the experiment's probe settings (:mod:`hifumotion.experiment.boundary_offset`);
+4. the pipeline (:func:`~hifumotion.workflow.pipeline.run_pipeline`) on ``experiment/observed``:
    GLCV sweep → 3D reconstruction → particle model → tracking → calibration on the
    training frames → prediction of the validation frames → scores against the truth;
-4. ``report/report.html``.
+5. ``report/report.html``.
 """
 
 from __future__ import annotations
@@ -106,8 +108,9 @@ class DemoSettings:
 
 
 def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | None = None) -> dict:
-    """Steps 1–4 of the module docstring into ``out`` (an output folder being written)."""
+    """Steps 1–5 of the module docstring into ``out`` (an output folder being written)."""
     from hifumotion.experiment import generate_twin, twin_config
+    from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.io.dataset import Dataset, load_dataset
     from hifumotion.report.build import ReportInputs, SegmentationResult, write_report
     from hifumotion.scoring import read_frame_masks
@@ -145,6 +148,12 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
                 paths["figure2"], paths["figure3"], "Initial contour: the dataset's clicked points (init.json)."))
 
     estimation = demo_estimation(settings.preset, cfg.resolution.model_tissue_particles, settings.estimation_overrides)
+    if "boundary_offset_mm" not in (settings.estimation_overrides or {}):
+        # the lab's calibration of its imaging system: a phantom of known shape (not the sample),
+        # imaged with the same probe settings, segmented the same way
+        with record.stage("imaging: boundary offset on a phantom"):
+            offset = measure_boundary_offset(cfg.imaging, "glcv", seed=settings.seed + 7919)
+        estimation.boundary_offset_mm = round(offset.offset_mm, 3)
     record.config["estimation"] = estimation.model_dump(mode="json")
     truth = read_frame_masks(twin / "truth")
     outcome = run_pipeline(twin / "observed", out, estimation, truth_masks=truth, truth_kind="twin's true sections",
@@ -159,7 +168,8 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
                              f"a {cfg.bar.force_n:g} N push by a rigid bar, tissue E = "
                              f"{cfg.tissue.youngs_modulus_pa:g} Pa, ν = {cfg.tissue.poisson_ratio:g}. The truth "
                              f"has {cfg.resolution.truth_particle_factor:g}× the fitted model's particles."),
-            experiment_facts={"truth tissue particles": truth_params["facts"]["truth_tissue_particles"],
+            experiment_facts={"segmentation boundary offset, measured on a phantom (mm)": estimation.boundary_offset_mm,
+                              "truth tissue particles": truth_params["facts"]["truth_tissue_particles"],
                               "true blob volume (mm³)": truth_params["facts"]["blob_volume_mm3"]},
             true_centroid_mm=np.asarray(motion["centroid_mm"], float),
             links=_links(out))

@@ -47,6 +47,7 @@ class EstimationConfig(ConfigModel):
     particles: int = Field(4399, ge=100, description="tissue particles of the fitted model (the paper: 4,399)")
     search_particles: int = Field(1000, ge=100, description="tissue particles of the coarser model the search runs on")
     max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
+    boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
     workers: int | None = Field(None, ge=1, description="Dask worker processes of the local cluster (default: the cores)")
     scheduler_address: str | None = Field(None, description="an existing Dask cluster, tcp://host:8786")
@@ -109,7 +110,7 @@ def run_pipeline(observed_dir: str | Path, out: str | Path, settings: Estimation
     validation = parse_frames(s.validation_frames, n, "estimation.validation_frames") or auto_valid
 
     with stage("observe: segment sweep, reconstruct, track"):
-        observation = prepare(observed, contours_csv, progress=tell)
+        observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm)
     with stage("calibrate"):
         (out / "calibration").mkdir(parents=True, exist_ok=True)
         cal = calibrate(observation, CalibrationSettings(

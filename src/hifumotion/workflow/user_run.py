@@ -133,6 +133,7 @@ particles = 4399
 search_particles = 1000
 max_evaluations = 8
 horizons_frames = [4, 6, 8]
+boundary_offset_mm = 0.0     # your system's segmentation bias, from a phantom of known size
 
 # training_contours = "expert_contours.csv"   # a physician's contours instead of GLCV tracking
 # [truth]
