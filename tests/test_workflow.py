@@ -34,7 +34,9 @@ def test_missing_files_names_exactly_the_pictures_that_are_not_there(tmp_path):
 
 
 def test_the_printed_example_configuration_is_valid():
-    cfg = RunConfig.model_validate(tomllib.loads(EXAMPLE))
+    printed = _cli("run", "--example", timeout=60)
+    assert printed.returncode == 0 and printed.stdout == EXAMPLE     # unwrapped, on stdout: "> run.toml"
+    cfg = RunConfig.model_validate(tomllib.loads(printed.stdout))
     assert cfg.estimation.training_frames == "20:101:10" and cfg.bar.tip_at_rest_mm[1] == 19.0
     assert default_frames(200) == ([*range(20, 101, 10)], [*range(110, 191, 10)])
 

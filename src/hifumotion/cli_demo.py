@@ -76,7 +76,7 @@ def run(
     from hifumotion.workflow.user_run import EXAMPLE, load_run_config, run_user
 
     if example:
-        console.print(EXAMPLE, highlight=False, markup=False, end="")
+        typer.echo(EXAMPLE, nl=False)        # plain stdout, unwrapped: meant for "> run.toml"
         return
     if config is None:
         raise InputError("give a run configuration file (hifumotion run --example prints one)", "CONFIG")
