@@ -56,6 +56,22 @@ class ReportInputs:
     links: dict = field(default_factory=dict)      # label -> path of output files worth opening
 
 
+def output_links(out: str | Path, extra: dict | None = None) -> dict:
+    """The files of a pipeline's output folder ``out`` worth opening, by label (plus ``extra``)."""
+    out = Path(out)
+    links = {"prediction/tissue.pvd — the fitted model's tissue, predicted frames (ParaView)":
+             out / "prediction" / "tissue.pvd",
+             "calibration/observation/tissue.vtp — reconstructed surface (ParaView)":
+             out / "calibration" / "observation" / "tissue.vtp",
+             "calibration/observation/tissue_volume.nii.gz — reconstructed volume (3D Slicer)":
+             out / "calibration" / "observation" / "tissue_volume.nii.gz",
+             "calibration/parameters.json — fitted parameters": out / "calibration" / "parameters.json",
+             "prediction/aim.csv — where to aim, every frame": out / "prediction" / "aim.csv",
+             "scores/table4.csv — per-frame scores": out / "scores" / "table4.csv"}
+    links.update(extra or {})
+    return links
+
+
 def _rel(target: Path, folder: Path) -> str:
     return Path(os.path.relpath(Path(target).resolve(), folder.resolve())).as_posix()
 
@@ -254,4 +270,4 @@ def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: 
     return write_text(folder / "report.html", page(inputs.title, intro, sections))
 
 
-__all__ = ["write_report", "ReportInputs", "SegmentationResult"]
+__all__ = ["write_report", "ReportInputs", "SegmentationResult", "output_links"]

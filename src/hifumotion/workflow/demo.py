@@ -112,7 +112,7 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
     from hifumotion.experiment import generate_twin, twin_config
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.io.dataset import Dataset, load_dataset
-    from hifumotion.report.build import ReportInputs, SegmentationResult, write_report
+    from hifumotion.report.build import ReportInputs, SegmentationResult, output_links, write_report
     from hifumotion.scoring import read_frame_masks
     from hifumotion.segmentation import METHODS
     from hifumotion.segmentation.compare import compare_methods, write_comparison
@@ -172,26 +172,14 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
                               "truth tissue particles": truth_params["facts"]["truth_tissue_particles"],
                               "true blob volume (mm³)": truth_params["facts"]["blob_volume_mm3"]},
             true_centroid_mm=np.asarray(motion["centroid_mm"], float),
-            links=_links(out))
+            links=output_links(out, {"experiment/truth/particles/frames.pvd — the twin's particles (ParaView)":
+                                     out / "experiment" / "truth" / "particles" / "frames.pvd"}))
         page = write_report(out / "report", outcome, truth, inputs)
     summary = outcome_summary(outcome)
     summary["report"] = page.relative_to(out).as_posix()
     summary["segmentation_mean_dsc"] = {r.title: {m: round(r.comparison.mean(m, "dsc"), 4) for m in methods}
                                         for r in segmentation}
     return summary
-
-
-def _links(out: Path) -> dict:
-    return {"prediction/tissue.pvd — the fitted model's tissue, predicted frames (ParaView)": out / "prediction" / "tissue.pvd",
-            "experiment/truth/particles/frames.pvd — the twin's particles (ParaView)":
-                out / "experiment" / "truth" / "particles" / "frames.pvd",
-            "calibration/observation/tissue.vtp — reconstructed surface (ParaView)":
-                out / "calibration" / "observation" / "tissue.vtp",
-            "calibration/observation/tissue_volume.nii.gz — reconstructed volume (3D Slicer)":
-                out / "calibration" / "observation" / "tissue_volume.nii.gz",
-            "calibration/parameters.json — fitted parameters": out / "calibration" / "parameters.json",
-            "prediction/aim.csv — where to aim, every frame": out / "prediction" / "aim.csv",
-            "scores/table4.csv — per-frame scores": out / "scores" / "table4.csv"}
 
 
 def _items(tell: Progress, stage: str):

@@ -230,7 +230,7 @@ def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
 
 def run_user(cfg: RunConfig, base: Path, out: Path, record, progress: Progress | None = None) -> dict:
     """Assemble ``out/observed``, run the pipeline, write ``out/report/report.html``."""
-    from hifumotion.report.build import ReportInputs, write_report
+    from hifumotion.report.build import ReportInputs, output_links, write_report
     from hifumotion.scoring import read_frame_masks
 
     with record.stage("read the user's files"):
@@ -241,16 +241,8 @@ def run_user(cfg: RunConfig, base: Path, out: Path, record, progress: Progress |
     outcome = run_pipeline(observed, out, cfg.estimation, contours_csv=_resolve(base, cfg.training_contours),
                            truth_masks=truth, truth_kind="expert masks", record=record, progress=progress)
     with record.stage("report"):
-        links = {"prediction/tissue.pvd — the fitted model's tissue (ParaView)": out / "prediction" / "tissue.pvd",
-                 "calibration/observation/tissue.vtp — reconstructed surface (ParaView)":
-                     out / "calibration" / "observation" / "tissue.vtp",
-                 "calibration/observation/tissue_volume.nii.gz — reconstructed volume (3D Slicer)":
-                     out / "calibration" / "observation" / "tissue_volume.nii.gz",
-                 "calibration/parameters.json — fitted parameters": out / "calibration" / "parameters.json",
-                 "prediction/aim.csv — where to aim, every frame": out / "prediction" / "aim.csv",
-                 "scores/table4.csv — per-frame scores": out / "scores" / "table4.csv"}
         page = write_report(out / "report", outcome, truth, ReportInputs(
-            title="hifumotion run", timings_s=dict(record.timings_s), links=links,
+            title="hifumotion run", timings_s=dict(record.timings_s), links=output_links(out),
             experiment_note=f"Sweep {cfg.sweep.path}, time series {cfg.frames.path}."))
     summary = outcome_summary(outcome)
     summary["report"] = page.relative_to(out).as_posix()
