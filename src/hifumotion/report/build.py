@@ -130,7 +130,9 @@ def _parameter_parts(outcome) -> list[str]:
         f"Method: {cal.search.method if cal.search is not None else 'table1'}; {cal.runs} forward runs; "
         f"training frames {cal.training_frames}. A quasi-static push is unchanged when F, E and β1 are scaled "
         "together, so the force is held at its nominal value and the data are judged on F/E and β1/E. "
-        "'—' as an error: the data do not bound that direction."))
+        "'—' as an error: the data do not bound that direction. A standard error says how closely the "
+        "training frames pin the model's parameters; it does not include the model's own error (the "
+        "reconstructed geometry, the particle resolution), which can be larger."))
     if cal.degeneracy:
         rows = [[f"×{d['factor']:g}", d["cost_mm"]] for d in cal.degeneracy]
         if rows:
