@@ -139,6 +139,12 @@ workers = 1
 masks = "{folder / 'truth' / 'frames'}"
 ''')
     out = tmp_path / "results"
+    # a contour file without the frame the configuration names is one line naming both
+    wrong = tmp_path / "wrong.toml"
+    wrong.write_text(cfg.read_text().replace("[initial_contour]", "[initial_contour]\nframe = 5"))
+    proc = _cli("run", str(wrong), "-o", str(out), timeout=120)
+    assert proc.returncode == 2 and "no contour of frame 5" in proc.stderr and "initial_contour.csv" in proc.stderr
+    assert not out.exists()
     proc = _cli("run", str(cfg), "-o", str(out))
     assert proc.returncode == 0, proc.stderr + proc.stdout
     # the assembled experiment is the twin's own: same geometry, timing and pictures

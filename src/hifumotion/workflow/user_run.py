@@ -153,6 +153,13 @@ def _resolve(base: Path, p: Path | None) -> Path | None:
     return None if p is None else (p if p.is_absolute() else base / p)
 
 
+def _frame_number(label: str) -> int | None:
+    try:
+        return int(float(label))
+    except ValueError:
+        return None
+
+
 def _as_uint8(frames: np.ndarray, flip: bool) -> np.ndarray:
     """Frames in [0, 1] (the readers' convention) as 8-bit grey, optionally flipped upside down."""
     out = np.clip(np.rint(np.asarray(frames, float) * 255.0), 0, 255).astype(np.uint8)
@@ -198,11 +205,14 @@ def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
         raise InputError(f"{len(z)} positions for {len(sweep.frames)} sweep images", "sweep.positions_mm")
     if cfg.sweep.first_z_mm is not None:
         z = z - z[0] + cfg.sweep.first_z_mm
-    contours = read_contours_csv(_resolve(base, cfg.initial_contour.path), spacing_mm=frames.spacing_mm)
-    wanted = [c for label, c in contours.items() if int(float(label)) == cfg.initial_contour.frame] \
-        or list(contours.values())[:1]
     if cfg.initial_contour.frame >= len(frames.frames):
         raise InputError(f"frame {cfg.initial_contour.frame} of {len(frames.frames)} frames", "initial_contour.frame")
+    contour_path = _resolve(base, cfg.initial_contour.path)
+    contours = read_contours_csv(contour_path, spacing_mm=frames.spacing_mm)
+    wanted = [c for label, c in contours.items() if _frame_number(label) == cfg.initial_contour.frame]
+    if not wanted:
+        raise InputError(f"no contour of frame {cfg.initial_contour.frame} (initial_contour.frame); frames given: "
+                         f"{', '.join(contours)}", contour_path)
 
     write_png_stack(folder / "sweep", _as_uint8(sweep.frames, cfg.sweep.flip_rows), prefix="slice_", digits=3)
     write_png_stack(folder / "frames", _as_uint8(frames.frames, cfg.frames.flip_rows), prefix="frame_", digits=4)
