@@ -63,34 +63,33 @@ def sweep_dataset(twin: str | Path, folder: str | Path, planes: int = 4, clicks:
     The ``planes`` sweep planes nearest the middle of the tissue, their true sections as
     masks, and a clinician's rough clicks on each (``clicks`` points along the true boundary,
     each off by a normal radial error of ``error_mm``) as the common initial contour."""
+    import shutil
+
     from hifumotion.contour import Contour
     from hifumotion.experiment.twin import clinician_contour
     from hifumotion.io import write_json
-    from hifumotion.io.raster import read_raster_array
-    from hifumotion.io.writers import read_mask, write_mask_png
     from hifumotion.io.files import atomic_path
+    from hifumotion.io.raster import read_raster_array
+    from hifumotion.io.writers import write_mask_png
 
     twin, folder = Path(twin), Path(folder)
     setup = json.loads((twin / "observed" / "setup.json").read_text())
     pixel = float(setup["imaging"]["pixel_mm"])
-    masks = sorted((twin / "truth" / "sweep").glob("slice_*.png"))
-    area = np.array([(read_raster_array(p)[0] > 0).sum() for p in masks])   # end planes are empty
+    paths = sorted((twin / "truth" / "sweep").glob("slice_*.png"))
+    sections = [read_raster_array(p)[0] > 0 for p in paths]        # the end planes are empty
+    area = np.array([m.sum() for m in sections])
     tissue = np.flatnonzero(area > 0.25 * area.max())
     middle = tissue[np.argsort(np.abs(tissue - tissue.mean()))[:planes]]
     rng = np.random.default_rng(seed)
     init = {}
-    import shutil
-
     for i in sorted(middle):
-        name = masks[i].name
-        truth = read_mask(masks[i])
-        contour = Contour.from_mask(truth, pixel)
+        name = paths[i].name
+        contour = Contour.from_mask(sections[i], pixel)
         points = clinician_contour(contour.points_px * pixel, clicks, error_mm, rng) / pixel
         init[name] = {"points": points.round(2).tolist()}
-        (folder / "images").mkdir(parents=True, exist_ok=True)
         with atomic_path(folder / "images" / name) as tmp:
             shutil.copyfile(twin / "observed" / "sweep" / name, tmp)
-        write_mask_png(folder / "masks" / name, truth)
+        write_mask_png(folder / "masks" / name, sections[i])
     write_json(folder / "init.json", init)
     return folder
 
