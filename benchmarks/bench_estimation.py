@@ -45,7 +45,7 @@ def run(twin: Path, mode: str, method: str, workers: int | None, horizons: list[
     from hifumotion.estimation.calibrate import CalibrationSettings, calibrate, recovered_parameters
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import default_frames
-    from hifumotion.experiment.observed import load_observed
+    from hifumotion.observed import load_observed
     from hifumotion.prediction.evaluate import evaluate, online_schedule
     from hifumotion.prediction.pipeline import predict_calibrated
     from hifumotion.scoring import read_frame_masks

@@ -24,6 +24,7 @@ import os
 import resource
 import sys
 import time
+from hifumotion import paper
 
 
 def paper_scene(spacing_mm: float = 1.16):
@@ -72,7 +73,7 @@ def main(argv=None) -> dict:
         "benchmark": "particles",
         "particles": moving,
         "counts": counts,
-        "paper_counts": {"tissue": 4399, "fluid": 3344, "rigid": 120},
+        "paper_counts": {"tissue": paper.TISSUE_PARTICLES, "fluid": paper.WATER_PARTICLES, "rigid": paper.BAR_PARTICLES},
         "spacing_mm": scene.particles.spacing_mm,
         "steps": args.steps,
         "steps_per_s": args.steps / wall,

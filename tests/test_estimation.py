@@ -167,7 +167,7 @@ def test_search_log_resumes(tmp_path):
 @pytest.mark.slow
 def test_prepare_segments_reconstructs_and_tracks_the_twin(small_twin):
     from hifumotion.estimation.prepare import prepare
-    from hifumotion.experiment.observed import load_observed
+    from hifumotion.observed import load_observed
     from hifumotion.metrics import dice
     from hifumotion.scoring import read_frame_masks
 

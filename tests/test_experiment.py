@@ -184,7 +184,7 @@ def test_mass_scaling_keeps_the_frames(twin, tmp_path):
 
 
 def test_load_observed_reads_what_the_twin_wrote(twin, tmp_path):
-    from hifumotion.experiment import load_observed
+    from hifumotion.observed import load_observed
 
     folder, result = twin
     obs = load_observed(folder / "observed")
@@ -197,7 +197,7 @@ def test_load_observed_reads_what_the_twin_wrote(twin, tmp_path):
 
 
 def test_shift_boundary_moves_a_disc_edge_by_the_offset():
-    from hifumotion.experiment.boundary_offset import shift_boundary
+    from hifumotion.observed import shift_boundary
     from conftest import disc
 
     px = 0.1                                        # mm; a disc of radius 2 mm

@@ -15,7 +15,9 @@ import pytest
 
 from hifumotion.estimation.protocol import default_frames
 from hifumotion.report.html import figure, missing_files, page, referenced_files
-from hifumotion.workflow.user_run import EXAMPLE, RunConfig
+from hifumotion.workflow.user_run import RunConfig, example_text
+
+EXAMPLE = example_text()
 
 CLI = [sys.executable, "-m", "hifumotion"]
 
@@ -128,7 +130,8 @@ size_mm = {list(setup['tank']['size_mm'])}
 water_depth_mm = {setup['tank']['water_depth_mm']}
 [bar]
 tip_at_rest_mm = {list(setup['bar']['tip_at_rest_mm'])}
-force_ramp_s = {setup['bar']['force_ramp_s']}
+[push]
+ramp_s = {setup['push']['ramp_s']}
 [estimation]
 particles = 200
 search_particles = 200

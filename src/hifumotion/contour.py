@@ -53,6 +53,22 @@ def _polygon_area(points: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
+def resample_closed(points: np.ndarray, count: int | None = None, step: float | None = None,
+                    start: float = 0.0) -> np.ndarray:
+    """Points evenly spaced in arc length along the closed polyline ``points`` ``(N, 2)``.
+
+    Give ``count`` (that many points) or ``step`` (one every ``step`` units of arc length,
+    at least 3); ``start`` is the arc length of the first point (wrapped around)."""
+    closed = np.vstack([points, points[:1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    if count is None:
+        if step is None:
+            raise ValueError("give count or step")
+        count = max(int(np.ceil(arc[-1] / step)), 3)
+    at = (start + np.arange(count) * arc[-1] / count) % arc[-1]
+    return np.column_stack([np.interp(at, arc, closed[:, 0]), np.interp(at, arc, closed[:, 1])])
+
+
 def mask_boundaries_px(mask: np.ndarray) -> list[np.ndarray]:
     """All boundary curves of a mask, sub-pixel, as ``(N, 2)`` arrays of ``(x, y)`` pixels.
 
@@ -147,12 +163,7 @@ class Contour:
 
     def resampled(self, step_px: float = 1.0) -> "Contour":
         """The same closed curve with points every ``step_px`` pixels of arc length (linear)."""
-        pts = np.vstack([self.points_px, self.points_px[:1]])
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        s = np.concatenate([[0.0], np.cumsum(seg)])
-        n = max(int(np.ceil(s[-1] / step_px)), 3)
-        t = np.linspace(0.0, s[-1], n, endpoint=False)
-        return Contour(np.column_stack([np.interp(t, s, pts[:, 0]), np.interp(t, s, pts[:, 1])]), self.spacing_mm)
+        return Contour(resample_closed(self.points_px, step=step_px), self.spacing_mm)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: points in px and mm, spacing, area and centroid."""

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from hifumotion.contour import Contour, as_mask, mask_boundaries_px
+from hifumotion.contour import Contour, as_mask, mask_boundaries_px, resample_closed
 from hifumotion.errors import InputError
 from hifumotion.sequence import as_spacing_mm
 
@@ -64,20 +64,11 @@ def _curves_mm(mask: np.ndarray, spacing: tuple[float, float]) -> list[np.ndarra
     return [c * scale for c in mask_boundaries_px(mask)]
 
 
-def _resample_closed(curve: np.ndarray, step: float) -> np.ndarray:
-    closed = np.vstack([curve, curve[:1]])
-    seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    n = max(int(np.ceil(s[-1] / step)), 3)
-    t = np.linspace(0.0, s[-1], n, endpoint=False)
-    return np.column_stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])])
-
-
 class _Polylines:
     """Closed polylines with an exact point-to-polyline distance query."""
 
     def __init__(self, curves: list[np.ndarray], step: float):
-        dense = [_resample_closed(c, step) for c in curves]
+        dense = [resample_closed(c, step=step) for c in curves]
         self.vertices = np.vstack(dense)
         # index of the next and previous vertex along each (closed) curve
         nxt, prv, start = [], [], 0
@@ -125,8 +116,8 @@ def boundary_distances(a: Any, b: Any, spacing: Any = None) -> tuple[np.ndarray,
         sp = _spacing(spacing)
         curves_a, curves_b = _curves_mm(ma, sp), _curves_mm(mb, sp)
     step = SAMPLE_STEP_PX * min(sp)
-    samples_a = np.vstack([_resample_closed(c, step) for c in curves_a])
-    samples_b = np.vstack([_resample_closed(c, step) for c in curves_b])
+    samples_a = np.vstack([resample_closed(c, step=step) for c in curves_a])
+    samples_b = np.vstack([resample_closed(c, step=step) for c in curves_b])
     d_ab = _Polylines(curves_b, step).distance(samples_a)
     d_ba = _Polylines(curves_a, step).distance(samples_b)
     return d_ab, d_ba

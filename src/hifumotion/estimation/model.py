@@ -5,8 +5,8 @@
 
 * the reconstructed tissue filled with particles at the paper's resolution
   (``tissue_particles``, 4,399 by default: the spacing shrinks until there are that many);
-* the pool and the bar from ``setup.json`` (size, water depth; bar radius, length,
-  direction, tip);
+* the pool, the bar and the push's ramp from ``setup.json`` (size, water depth; bar radius,
+  length, direction, tip);
 * the contour points A: points spread evenly along the frame-0 contour, in the
   imaging plane (tank mm).
 
@@ -24,26 +24,27 @@ need not be the unloaded one.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from hifumotion.errors import InputError
+from hifumotion.particles.quasi_static import settling
 from hifumotion.particles.scene import (BarConfig, ParticleConfig, PhysicsConfig, RunConfig, Scene, TankConfig,
-                                        TissueConfig)
+                                        TissueConfig, spacing_for_count, touching_tip)
+from hifumotion import paper
 
 
 @dataclass(frozen=True)
 class Parameters:
     """The parameter set K of the paper's Table 3 (SI units)."""
 
-    force_n: float = 0.25              # external force held by the bar (N)
-    youngs_modulus_pa: float = 13e3    # E (Pa)
-    poisson_ratio: float = 0.47        # ν
-    beta1: float = 1.0                 # β1 of Eq. 16 (Pa·s^(1+β2))
-    beta2: float = 0.5                 # β2 of Eq. 16
+    force_n: float = paper.FORCE_N                      # external force held by the bar (N)
+    youngs_modulus_pa: float = paper.YOUNGS_MODULUS_PA  # E (Pa)
+    poisson_ratio: float = paper.POISSON_RATIO          # ν
+    beta1: float = paper.BETA1                          # β1 of Eq. 16 (Pa·s^(1+β2))
+    beta2: float = paper.BETA2                          # β2 of Eq. 16
 
     def as_dict(self) -> dict[str, float]:
         return {k: float(v) for k, v in asdict(self).items()}
@@ -56,13 +57,13 @@ class Parameters:
 class ModelSettings:
     """Numerical settings of the fitted model (not fitted themselves)."""
 
-    tissue_particles: int = 4399        # the paper's count of tissue particles
+    tissue_particles: int = paper.TISSUE_PARTICLES  # the paper's count of tissue particles
     support_factor: float = 2.0         # kernel support h in spacings
     mass_scaling: float = 2.0e4         # inertia multiplier of the quasi-static push
     settle_periods: float = 6.0         # settling time in 1/ω of the slowest elastic mode
     cfl: float = 0.4                    # safety factor on the time step
     max_step_s: float = 5e-3            # largest time step (s)
-    force_ramp_s: float | None = None   # the force's linear rise (s); default: setup.json's bar.force_ramp_s, else 0
+    force_ramp_s: float | None = None   # the force's linear rise (s); default: setup.json's push.ramp_s
     tissue_density_kg_m3: float = 1050.0
     rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s); a regularisation, not fitted
     contour_points: int = 64            # size of the point set A
@@ -100,7 +101,7 @@ class ModelRun:
 
 def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     """The forward model of an :class:`~hifumotion.estimation.prepare.Observation`."""
-    from hifumotion.contour import Contour
+    from hifumotion.contour import Contour, resample_closed
 
     s = settings or ModelSettings()
     setup = observation.observed.setup
@@ -114,26 +115,19 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
         return tissue[above], filled.volume_mm3[above]
 
     # the paper's particle count: the lattice misses a little of the surface, so shrink until it is reached
-    dx = (rec.volume_mm3 / s.tissue_particles) ** (1 / 3)
-    tissue, volume = fill(dx)
-    while len(tissue) < s.tissue_particles:
-        dx *= 0.99
-        tissue, volume = fill(dx)
+    dx, (tissue, volume) = spacing_for_count(fill, (rec.volume_mm3 / s.tissue_particles) ** (1 / 3),
+                                             s.tissue_particles)
     # on the floor: the lowest layer half a spacing up (a gap would make the tissue fall into the push)
     tissue[:, 1] -= tissue[:, 1].min() - 0.5 * dx
-    try:
-        tank = TankConfig(size_mm=tuple(setup["tank"]["size_mm"]), water_depth_mm=float(setup["tank"]["water_depth_mm"]))
-        b = setup["bar"]
-        bar = BarConfig(enabled=bool(b.get("enabled", True)), radius_mm=float(b["radius_mm"]),
-                        length_mm=float(b["length_mm"]), direction=tuple(b["direction"]),
-                        tip_mm=_touching_tip(tissue, np.asarray(b["tip_at_rest_mm"], float),
-                                             np.asarray(b["direction"], float), float(b["radius_mm"]), dx),
-                        weight_supported=bool(b.get("weight_supported", True)),
-                        force_n=Parameters().force_n,
-                        ramp_s=float(s.force_ramp_s if s.force_ramp_s is not None else b.get("force_ramp_s", 0.0)))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"setup.json: expected tank.size_mm, tank.water_depth_mm and bar.radius_mm, length_mm, "
-                         f"direction, tip_at_rest_mm ({exc})", "setup.json") from None
+    b = setup.bar
+    axis = np.asarray(b.direction, float)
+    # the reconstructed surface is not exactly where the real one was: the tip touches the model's
+    tip = touching_tip(tissue, np.asarray(b.tip_at_rest_mm, float), axis, b.radius_mm, dx)
+    tank = TankConfig(size_mm=setup.tank.size_mm, water_depth_mm=setup.tank.water_depth_mm)
+    bar = BarConfig(enabled=b.enabled, radius_mm=b.radius_mm, length_mm=b.length_mm, direction=b.direction,
+                    tip_mm=tuple(float(c) for c in (b.tip_at_rest_mm if tip is None else tip)),
+                    weight_supported=b.weight_supported, force_n=Parameters().force_n,
+                    ramp_s=float(s.force_ramp_s if s.force_ramp_s is not None else setup.push.ramp_s))
     tissue_cfg = TissueConfig(density_kg_m3=s.tissue_density_kg_m3, rate_floor_per_s=s.rate_floor_per_s,
                               shape="particles", particles_csv="tissue_particles.csv",
                               centre_mm=tuple(float(c) for c in (tissue.min(0) + tissue.max(0)) / 2))
@@ -143,28 +137,9 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
                   run=RunConfig(duration_s=1.0, output_interval_s=observation.observed.frame_interval_s,
                                 mass_scaling=s.mass_scaling, cfl=s.cfl, max_step_s=s.max_step_s, write_vtu=False))
     contour = Contour.from_mask(observation.frame_masks[0], observation.pixel_mm)
-    closed = np.vstack([contour.points_px, contour.points_px[:1]])
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
-    at = np.arange(s.contour_points) * arc[-1] / s.contour_points
-    px = np.column_stack([np.interp(at, arc, closed[:, 0]), np.interp(at, arc, closed[:, 1])])
+    px = resample_closed(contour.points_px, count=s.contour_points)
     points = _plane_points(observation.frame_plane, px)
     return ModelSpec(scene, tissue, volume, points, observation.observed.frame_interval_s, s)
-
-
-def _touching_tip(tissue_mm: np.ndarray, tip_mm: np.ndarray, direction: np.ndarray, radius_mm: float,
-                  dx_mm: float) -> tuple[float, float, float]:
-    """The bar's tip on its line of action, touching the model's tissue (one spacing, where
-    Eq. 18's contact begins, from the first particle under its end face). The reconstructed
-    surface is not exactly where the real one was: a tip inside it would start the push
-    with a spurious compression, one short of it with a free fall onto the tissue."""
-    axis = direction / np.linalg.norm(direction)
-    rel = tissue_mm - tip_mm
-    along = rel @ axis
-    across = np.linalg.norm(rel - along[:, None] * axis, axis=1)
-    under = across <= radius_mm
-    if not under.any():
-        return tuple(float(c) for c in tip_mm)
-    return tuple(float(c) for c in tip_mm + (along[under].min() - dx_mm) * axis)
 
 
 def _plane_points(plane, xy_px: np.ndarray) -> np.ndarray:
@@ -177,10 +152,9 @@ def _plane_points(plane, xy_px: np.ndarray) -> np.ndarray:
 def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
     """The spec's scene with the parameter set ``k``, run to frame ``last_frame``."""
     s = spec.settings
-    height_m = float(np.ptp(spec.tissue_mm[:, 1]) + spec.spacing_mm) * 1e-3
-    # slowest elastic mode: a quarter shear wave over the height, slowed by the mass scaling
-    omega = 0.5 * math.pi * math.sqrt(k.youngs_modulus_pa / s.tissue_density_kg_m3) / height_m
-    omega /= math.sqrt(s.mass_scaling)
+    height_mm = float(np.ptp(spec.tissue_mm[:, 1]) + spec.spacing_mm)
+    settle_s, damping = settling(k.youngs_modulus_pa, s.tissue_density_kg_m3, height_mm, s.mass_scaling,
+                                 s.settle_periods)
     scene = spec.scene.model_copy(deep=True)
     scene.tissue.youngs_modulus_pa = k.youngs_modulus_pa
     scene.tissue.poisson_ratio = k.poisson_ratio
@@ -188,8 +162,8 @@ def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
     scene.tissue.beta2 = k.beta2
     scene.bar.force_n = k.force_n
     scene.run.duration_s = max(last_frame, 1) * spec.frame_interval_s
-    scene.run.settle_s = s.settle_periods / omega
-    scene.run.settle_damping_per_s = 2.0 * omega
+    scene.run.settle_s = settle_s
+    scene.run.settle_damping_per_s = damping
     return scene
 
 

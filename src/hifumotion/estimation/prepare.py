@@ -1,6 +1,6 @@
 """Step 1 of the estimation: from an observed experiment to what the model is fitted to.
 
-Only the observer's data is read (``observed/``, :func:`~hifumotion.experiment.load_observed`):
+Only the observer's data is read (``observed/``, :func:`~hifumotion.observed.load_observed`):
 
 1. the spatial sweep is segmented with GLCV from the clinician's contour
    (:func:`~hifumotion.segmentation.sweep.segment_sweep`), starting in the sweep plane
@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.errors import InputError
-from hifumotion.experiment.observed import Observed
+from hifumotion.observed import Observed, Setup
 from hifumotion.particles.section import Plane
 from hifumotion.reconstruction import Reconstruction, reconstruct
 from hifumotion.segmentation.sweep import SweepSegmentation, segment_sweep
@@ -71,12 +71,12 @@ class Observation:
     @property
     def frame_plane(self) -> Plane:
         """The time series' imaging plane in the tank frame."""
-        return _plane_at(self.offset_mm, self.observed, self.observed.setup["imaging"]["frames_plane_z_mm"])
+        return _plane_at(self.offset_mm, self.observed, self.observed.setup.imaging.frames_plane_z_mm)
 
     def reference_shape(self):
         """The frame-0 shape the predictions carry: the frame-0 mask in the imaging plane,
         continued out of it by the reconstruction (tank frame)."""
-        from hifumotion.prediction.physics import ReferenceShape
+        from hifumotion.estimation.reference import ReferenceShape
 
         rec = self.reconstruction
         return ReferenceShape(self.frame_masks[0], self.frame_plane, rec.distance_mm, rec.voxel_mm,
@@ -87,51 +87,29 @@ class Observation:
         return self.reconstruction.inside(np.asarray(points_mm, float) - self.offset_mm)
 
 
-def _plane_geometry(observed: Observed) -> tuple[np.ndarray, float]:
-    im = observed.setup.get("imaging", {})
-    try:
-        x0, y0 = (float(v) for v in im["row0_col0_mm"])
-        z_frames = float(im["frames_plane_z_mm"])
-    except (KeyError, TypeError, ValueError):
-        raise InputError("setup.json: expected imaging.row0_col0_mm [x, y] and imaging.frames_plane_z_mm",
-                         "setup.json") from None
-    col = np.asarray(im.get("column_axis", (1.0, 0.0, 0.0)), float)
-    row = np.asarray(im.get("row_axis", (0.0, 1.0, 0.0)), float)
-    if not (np.allclose(col, [1, 0, 0]) and np.allclose(row, [0, 1, 0])):
-        raise InputError("setup.json: only planes with columns along x and rows along y (z = plane position) "
-                         "are supported", "imaging.column_axis")
-    return np.array([x0, y0, 0.0]), z_frames
-
-
 #: Margin (mm) around the resting bar whose pixels cannot be tissue (the bar's blur in the image).
 BAR_MARGIN_MM = 0.5
 
 
-def known_solids(plane: Plane, setup: dict, bar: bool = True) -> np.ndarray:
-    """Pixels of ``plane`` that cannot be the tissue: below the pool's floor (tank y < 0), and,
-    with ``bar``, inside the resting bar grown by :data:`BAR_MARGIN_MM` (``setup.json``)."""
+def known_solids(plane: Plane, setup: Setup, bar: bool = True) -> np.ndarray:
+    """Pixels of ``plane`` that cannot be the tissue: below the pool's floor (y < 0), and,
+    with ``bar``, inside the resting bar grown by :data:`BAR_MARGIN_MM`."""
     pts = plane.points_mm()
     out = pts[..., 1] < 0.0
-    b = setup.get("bar", {})
-    if bar and b.get("enabled", False):
-        try:
-            axis = np.asarray(b["direction"], float)
-            axis = axis / np.linalg.norm(axis)
-            d = pts - np.asarray(b["tip_at_rest_mm"], float)
-            radius, length = float(b["radius_mm"]), float(b["length_mm"])
-        except (KeyError, TypeError, ValueError):
-            raise InputError("setup.json: expected bar.direction, tip_at_rest_mm, radius_mm, length_mm",
-                             "setup.json") from None
+    b = setup.bar
+    if bar and b.enabled:
+        axis = np.asarray(b.direction, float)
+        d = pts - np.asarray(b.tip_at_rest_mm, float)
         along = d @ axis
         radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
-        out |= (along <= BAR_MARGIN_MM) & (along >= -length - BAR_MARGIN_MM) & (radial <= radius + BAR_MARGIN_MM)
+        out |= ((along <= BAR_MARGIN_MM) & (along >= -b.length_mm - BAR_MARGIN_MM)
+                & (radial <= b.radius_mm + BAR_MARGIN_MM))
     return out
 
 
-def _plane_at(observation_offset: np.ndarray, observed: Observed, z_mm: float) -> Plane:
-    im = observed.setup["imaging"]
-    return Plane((float(observation_offset[0]), float(observation_offset[1]), float(z_mm)),
-                 tuple(im.get("column_axis", (1.0, 0.0, 0.0))), tuple(im.get("row_axis", (0.0, 1.0, 0.0))),
+def _plane_at(origin_mm: np.ndarray, observed: Observed, z_mm: float) -> Plane:
+    im = observed.setup.imaging
+    return Plane((float(origin_mm[0]), float(origin_mm[1]), float(z_mm)), im.column_axis, im.row_axis,
                  tuple(observed.frames.shape[1:]), observed.pixel_mm)
 
 
@@ -158,15 +136,16 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
 
     ``boundary_offset_mm``: how far outside the true boundary the imaging system's
     segmentations lie, measured on a phantom of known size
-    (:func:`~hifumotion.experiment.boundary_offset.measure_boundary_offset`); the sweep's and
+    (for instance :func:`~hifumotion.experiment.boundary_offset.measure_boundary_offset` on a
+    simulated one); the sweep's and
     the tracked frames' masks are moved inwards by it (the user's own contours are not).
     """
-    from hifumotion.experiment.boundary_offset import shift_boundary
+    from hifumotion.observed import shift_boundary
     from hifumotion.segmentation import track
 
     tell = progress or (lambda stage, fraction: None)
     timings: dict[str, float] = {}
-    offset, z_frames = _plane_geometry(observed)
+    offset, z_frames = observed.setup.image_origin_mm, observed.setup.imaging.frames_plane_z_mm
     px = observed.pixel_mm
     init = observed.initial_contour
 

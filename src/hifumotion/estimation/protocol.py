@@ -8,8 +8,7 @@ of another length gets the same fractions of its length: training at 10 %,
 
 from __future__ import annotations
 
-import numpy as np
-
+from hifumotion import paper
 from hifumotion.errors import InputError
 
 
@@ -17,8 +16,8 @@ def default_frames(n_frames: int) -> tuple[list[int], list[int]]:
     """The paper's training and validation frames, scaled to ``n_frames``."""
     if n_frames < 20:
         raise InputError(f"a series of {n_frames} frames is too short for the paper's protocol (≥ 20)", "frames")
-    train = sorted({int(round(n_frames * f)) for f in np.arange(0.10, 0.501, 0.05)})
-    valid = sorted({int(round(n_frames * f)) for f in np.arange(0.55, 0.951, 0.05)})
+    train = sorted({int(round(n_frames * f / paper.SERIES_FRAMES)) for f in paper.TRAINING_FRAMES})
+    valid = sorted({int(round(n_frames * f / paper.SERIES_FRAMES)) for f in paper.VALIDATION_FRAMES})
     return train, [v for v in valid if v < n_frames]
 
 

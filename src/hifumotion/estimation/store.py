@@ -26,7 +26,7 @@ from hifumotion.errors import InputError
 from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters
 from hifumotion.io.files import write_text
 from hifumotion.particles.section import Plane
-from hifumotion.prediction.physics import ReferenceShape
+from hifumotion.estimation.reference import ReferenceShape
 
 
 def _csv(path: Path, header: str, rows: np.ndarray) -> None:
@@ -34,16 +34,18 @@ def _csv(path: Path, header: str, rows: np.ndarray) -> None:
     write_text(path, header + "\n" + body + "\n")
 
 
-def _provenance(observed_dir: str | Path, folder: Path) -> str:
+def _provenance(observed_dir: str | Path | None, folder: Path) -> str | None:
     """Where the observation came from: relative to the calibration when both are in one
     output folder (which is written under a temporary name and then renamed), else absolute."""
     import os
 
+    if observed_dir is None:
+        return None
     obs, root = Path(observed_dir).resolve(), folder.resolve()
     return Path(os.path.relpath(obs, root)).as_posix() if obs.is_relative_to(root.parent) else str(obs)
 
 
-def save_calibration(cal, folder: str | Path, observed_dir: str | Path, extra: dict | None = None) -> dict:
+def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = None, extra: dict | None = None) -> dict:
     """Write a :class:`~hifumotion.estimation.calibrate.Calibration` into ``folder``."""
     from hifumotion.config import dump_toml
     from hifumotion.io import write_json

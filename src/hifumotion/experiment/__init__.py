@@ -15,8 +15,7 @@ of one plane during the push, a clinician's rough contour on the first frame.
 
 from hifumotion.experiment.blob import Blob
 from hifumotion.experiment.config import PRESETS, TwinConfig, twin_config
-from hifumotion.experiment.observed import Observed, load_observed
 from hifumotion.experiment.twin import TwinResult, generate_twin, motion_summary, resolution, summary_line
 
-__all__ = ["Blob", "Observed", "load_observed", "PRESETS", "TwinConfig", "twin_config", "TwinResult", "generate_twin", "motion_summary",
+__all__ = ["Blob", "PRESETS", "TwinConfig", "twin_config", "TwinResult", "generate_twin", "motion_summary",
            "resolution", "summary_line"]

@@ -24,6 +24,7 @@ from pydantic import Field
 from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
 from hifumotion.particles.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
+from hifumotion import paper
 
 
 class BlobConfig(ConfigModel):
@@ -34,7 +35,7 @@ class BlobConfig(ConfigModel):
 
 
 class ResolutionConfig(ConfigModel):
-    model_tissue_particles: int = Field(4399, ge=100, description="tissue particles of the model that will be fitted (the paper: 4,399)")
+    model_tissue_particles: int = Field(paper.TISSUE_PARTICLES, ge=100, description="tissue particles of the model that will be fitted (the paper: 4,399)")
     truth_particle_factor: float = Field(2.0, ge=1.0, description="the truth has this many times the fitted model's particles (≥ 2 for an honest test)")
     support_factor: float = Field(2.0, ge=1.5, le=3.0, description="kernel support radius h in particle spacings")
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,14 +27,16 @@ from typing import Callable
 
 import numpy as np
 
-from hifumotion.contour import Contour
+from hifumotion.contour import Contour, resample_closed
 from hifumotion.experiment.blob import Blob
 from hifumotion.experiment.config import TwinConfig
 from hifumotion.experiment import imaging as im
 from hifumotion.io import write_json
 from hifumotion.io.files import write_text
-from hifumotion.io.writers import write_contours_csv, write_masks_nifti, write_nifti, write_png_stack
-from hifumotion.particles.scene import ParticleConfig, RunConfig, Scene, TissueConfig
+from hifumotion.io.writers import write_contours_csv, write_masks_nifti, write_png_stack
+from hifumotion.observed import BarSetup, ImagingGeometry, Observed, PushSchedule, Setup, TankSetup, write_observed
+from hifumotion.particles.scene import ParticleConfig, RunConfig, Scene, TissueConfig, spacing_for_count
+from hifumotion.particles.quasi_static import settling as quasi_static_settling
 from hifumotion.particles.section import mapped_section
 from hifumotion.particles.simulate import SimulationResult, simulate
 
@@ -54,6 +55,8 @@ class TwinResult:
     sweep_masks: np.ndarray       # bool (S, H, W)
     probe: im.Probe
     simulation: SimulationResult
+    observed: Observed            # observed/: what the device's user has
+    parameters: dict              # truth/parameters.json
     facts: dict = field(default_factory=dict)
     timings_s: dict = field(default_factory=dict)
     motion: dict = field(default_factory=dict)   # motion.json: centroid path, area, checks
@@ -68,20 +71,14 @@ def resolution(cfg: TwinConfig, blob: Blob) -> dict:
 
 
 def settling(cfg: TwinConfig, height_mm: float) -> tuple[float, float]:
-    """Settling time (s) and damping (1/s): the configured ones, or from the slowest mode.
-
-    The tissue's slowest elastic mode, a quarter wave of shear over its height H, has
-    ω = (π/2) √(E/ρ) / H, slowed √s-fold by the mass scaling s. Critical damping 2ω
-    relaxes it fastest; 6/ω leaves e⁻⁶ of the initial sag. A settling that is too
-    short (0.3 s at s = 2×10⁴) left the tissue sagging into the first second of the
-    push, where it showed as the largest difference between mass scalings.
-    """
+    """Settling time (s) and damping (1/s): the configured ones, or from the slowest mode
+    (:func:`~hifumotion.particles.quasi_static.settling`). A settling that is too short
+    (0.3 s at s = 2×10⁴) left the tissue sagging into the first second of the push, where
+    it showed as the largest difference between mass scalings."""
     t = cfg.tissue
-    omega = 0.5 * math.pi * math.sqrt(t.youngs_modulus_pa / t.density_kg_m3) / (height_mm * 1e-3)
-    omega /= math.sqrt(cfg.run.mass_scaling)
-    duration = cfg.run.settle_s if cfg.run.settle_s is not None else 6.0 / omega
-    damping = cfg.run.settle_damping_per_s if cfg.run.settle_damping_per_s is not None else 2.0 * omega
-    return duration, damping
+    duration, damping = quasi_static_settling(t.youngs_modulus_pa, t.density_kg_m3, height_mm, cfg.run.mass_scaling)
+    return (cfg.run.settle_s if cfg.run.settle_s is not None else duration,
+            cfg.run.settle_damping_per_s if cfg.run.settle_damping_per_s is not None else damping)
 
 
 def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float, height_mm: float,
@@ -107,12 +104,8 @@ def clinician_contour(contour_mm: np.ndarray, cfg_points: int, error_mm: float,
     """A rough contour as clicked: ``cfg_points`` points spread along the true boundary
     (in-plane mm), each off by a random radial error, as an (N, 2) polygon in mm."""
     c = np.asarray(contour_mm, float)
-    seg = np.linalg.norm(np.diff(np.vstack([c, c[:1]]), axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    start = rng.uniform(0, s[-1])
-    at = (start + np.arange(cfg_points) * s[-1] / cfg_points) % s[-1]
-    closed = np.vstack([c, c[:1]])
-    pts = np.column_stack([np.interp(at, s, closed[:, 0]), np.interp(at, s, closed[:, 1])])
+    length = float(np.linalg.norm(np.diff(np.vstack([c, c[:1]]), axis=0), axis=1).sum())
+    pts = resample_closed(c, count=cfg_points, start=rng.uniform(0, length))
     centre = c.mean(0)
     radial = pts - centre
     radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-9)
@@ -205,9 +198,9 @@ def simulate_truth(cfg: TwinConfig, folder: str | Path, progress: Callable[[floa
     factor = cfg.resolution.truth_particle_factor if particle_factor is None else particle_factor
     dx = res["model_spacing_mm"] / factor ** (1 / 3)
     wanted = factor * cfg.resolution.model_tissue_particles
-    pts = blob.particles(dx)
-    while len(pts) < 0.995 * wanted and factor > 1.0:   # the lattice misses a little of the lumps
-        dx *= 0.995
+    if factor > 1.0:   # the lattice misses a little of the lumps
+        dx, pts = spacing_for_count(blob.particles, dx, wanted, shrink=0.995, tolerance=0.995)
+    else:
         pts = blob.particles(dx)
     res["truth_spacing_mm"] = dx
     # the resting frame's origin goes to the middle of the tank floor
@@ -335,28 +328,20 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     t4 = time.perf_counter()
     px = probe.pixel_mm
     interval = 1.0 / cfg.imaging.frame_rate_hz
-    write_png_stack(obs / "frames", frames, prefix="frame_", digits=4)
-    write_nifti(obs / "frames.nii.gz", frames, (px, px), frame_interval_s=interval)
-    write_png_stack(obs / "sweep", sweep, prefix="slice_", digits=3)
-    write_nifti(obs / "sweep.nii.gz", sweep, (px, px), slice_positions_mm=probe.sweep_z_mm)
-    _write_csv(obs / "sweep_positions.csv", ["slice", "z_mm"],
-               ([k, f"{z:.4f}"] for k, z in enumerate(probe.sweep_z_mm)))
-    write_contours_csv(obs / "initial_contour.csv", {0: Contour.from_mm(clicked, px)})
-    write_json(obs / "setup.json", {
-        "description": "What the operator of the HIFU device knows: image geometry and timing, the pool, "
-                       "the bar's shape, where it starts and how long its force takes to rise (not how large it "
-                       "is). Tank frame in mm, y up; image rows run "
-                       "upwards from the probe (depth), columns along x.",
-        "frame_interval_s": interval, "frames": int(len(times)), "frame_files": "frames/frame_%04d.png",
-        "sweep_files": "sweep/slice_%03d.png", "initial_contour_frame": 0,
-        "imaging": probe.as_dict(),
-        "tank": {"size_mm": list(cfg.tank.size_mm), "water_depth_mm": cfg.tank.water_depth_mm},
-        "bar": {"enabled": cfg.bar.enabled, "radius_mm": cfg.bar.radius_mm, "length_mm": cfg.bar.length_mm,
-                "direction": axis.tolist(), "tip_at_rest_mm": tip0.tolist(),
-                "weight_supported": cfg.bar.weight_supported,
-                # how the push is applied, not how hard: the force rises linearly over this time, then holds
-                "force_ramp_s": cfg.bar.ramp_s},
-    })
+    setup = Setup(
+        description="What the operator of the HIFU device knows: image geometry and timing, the pool, the bar's "
+                    "shape, where it starts and the shape of its push (not how hard it is). Pool frame in mm, y up; "
+                    "image rows run upwards from the probe (depth), columns along x.",
+        frame_interval_s=interval, frames=int(len(times)), initial_contour_frame=0,
+        imaging=ImagingGeometry(**probe.as_dict()),
+        tank=TankSetup(size_mm=tuple(cfg.tank.size_mm), water_depth_mm=cfg.tank.water_depth_mm),
+        bar=BarSetup(enabled=cfg.bar.enabled, radius_mm=cfg.bar.radius_mm, length_mm=cfg.bar.length_mm,
+                     direction=tuple(axis.tolist()), tip_at_rest_mm=tuple(tip0.tolist()) if cfg.bar.enabled
+                     else tuple(0.5 * np.asarray(cfg.tank.size_mm)), weight_supported=cfg.bar.weight_supported),
+        # how the push is applied, not how hard: the force rises linearly over this time, then holds
+        push=PushSchedule(shape="ramp_hold", ramp_s=cfg.bar.ramp_s))
+    observed = Observed(sweep, np.asarray(probe.sweep_z_mm, float), frames, Contour.from_mm(clicked, px), setup)
+    write_observed(obs, setup, sweep, observed.sweep_z_mm, frames, observed.initial_contour)
     write_png_stack(tru / "frames", frame_masks, prefix="frame_", digits=4)
     write_png_stack(tru / "sweep", sweep_masks, prefix="slice_", digits=3)
     write_masks_nifti(tru / "frames.nii.gz", frame_masks, (px, px), frame_interval_s=interval)
@@ -374,7 +359,7 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     write_json(tru / "motion.json", motion)
     facts = {**facts, **res, "truth_tissue_particles": int(len(pts)),
              "model_tissue_particles": cfg.resolution.model_tissue_particles}
-    write_json(tru / "parameters.json", {
+    parameters = {
         "description": "The true parameters of the synthetic experiment (SI unless the name says otherwise).",
         "external_force_n": cfg.bar.force_n, "force_ramp_s": cfg.bar.ramp_s,
         "force_direction": axis.tolist(),
@@ -392,11 +377,13 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
         "seed": cfg.seed,
         "facts": facts,
         "config": json.loads(cfg.model_dump_json()),
-    })
+    }
+    write_json(tru / "parameters.json", parameters)
     timings["write_s"] = time.perf_counter() - t4
     timings["total_s"] = time.perf_counter() - t0
     facts["steps"] = sim.steps
-    return TwinResult(cfg, times, frames, frame_masks, sweep, sweep_masks, probe, sim, facts, timings, motion)
+    return TwinResult(cfg, times, frames, frame_masks, sweep, sweep_masks, probe, sim, observed, parameters, facts, timings,
+                      motion)
 
 
 def summary_line(result: TwinResult) -> str:

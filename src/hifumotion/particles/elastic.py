@@ -53,6 +53,7 @@ from numba import njit, prange
 from scipy.spatial import cKDTree
 
 from hifumotion.particles.viscosity import rheological_mu
+from hifumotion import paper
 
 
 
@@ -87,11 +88,11 @@ class TissueParameters:
         needs more than two layers of neighbours at a surface: 2.5 by default.
     """
 
-    youngs_modulus_pa: float = 13e3
-    poisson_ratio: float = 0.47
+    youngs_modulus_pa: float = paper.YOUNGS_MODULUS_PA
+    poisson_ratio: float = paper.POISSON_RATIO
     volume_stiffness_pa: float = 0.0
-    beta1: float = 1.0
-    beta2: float = 0.5
+    beta1: float = paper.BETA1
+    beta2: float = paper.BETA2
     mu_max_pa_s: float = 1e7
     rate_floor_per_s: float = 1e-3
     hourglass: float = 1.0

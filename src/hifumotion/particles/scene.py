@@ -39,6 +39,7 @@ from hifumotion.particles.rigid import piecewise_linear_schedule
 from hifumotion.particles.solver import SolverSettings
 from hifumotion.particles.system import (CouplingParameters, FluidParameters, ParticleSystem,
                                          build_system, lattice, tank_walls)
+from hifumotion import paper
 
 MM = 1e-3
 
@@ -67,10 +68,10 @@ class TissueMaterial(ConfigModel):
     """The tissue's material (Table 3's parameters and the model's options)."""
 
     density_kg_m3: float = Field(1050.0, gt=0, description="tissue density in kg/m³")
-    youngs_modulus_pa: float = Field(13e3, gt=0, description="Young's modulus E in Pa (Table 3: 13 kPa)")
-    poisson_ratio: float = Field(0.47, gt=-1, lt=0.5, description="Poisson's ratio (Table 3: 0.47)")
-    beta1: float = Field(1.0, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
-    beta2: float = Field(0.5, description="rheological viscosity exponent β2 (Table 3: 0.5)")
+    youngs_modulus_pa: float = Field(paper.YOUNGS_MODULUS_PA, gt=0, description="Young's modulus E in Pa (Table 3: 13 kPa)")
+    poisson_ratio: float = Field(paper.POISSON_RATIO, gt=-1, lt=0.5, description="Poisson's ratio (Table 3: 0.47)")
+    beta1: float = Field(paper.BETA1, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
+    beta2: float = Field(paper.BETA2, description="rheological viscosity exponent β2 (Table 3: 0.5)")
     rate_floor_per_s: float = Field(1e-3, gt=0, description="floor of the shear rate in the rheological viscosity μ = β1 max(rate, floor)^β2, in 1/s")
     volume_stiffness_pa: float = Field(0.0, ge=0, description="k_v of the volume-conservation force (Eq. 15–16) in Pa")
     hourglass: float = Field(1.0, ge=0, description="hourglass control α (0: off)")
@@ -105,7 +106,7 @@ class BarConfig(ConfigModel):
     tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: touching the tissue (one spacing from the first tissue particle under its end face), on the axis through the tissue's centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
     weight_supported: bool = Field(True, description="the hand holding the bar carries its weight, so the push on the tissue is force_n alone")
-    force_n: float = Field(0.25, description="pushing force held after the ramp, in N (Table 3: 0.25)")
+    force_n: float = Field(paper.FORCE_N, description="pushing force held after the ramp, in N (Table 3: 0.25)")
     ramp_s: float = Field(0.2, ge=0, description="time over which the force rises linearly from 0, in s")
     schedule_times_s: list[float] | None = Field(None, description="explicit force schedule: times in s (overrides force_n/ramp_s)")
     schedule_force_n: list[float] | None = Field(None, description="explicit force schedule: forces in N")
@@ -226,23 +227,53 @@ def tissue_particles_mm(cfg: TissueConfig, tank: TankConfig, spacing_mm: float
     return pts, np.full(len(pts), volume / len(pts))
 
 
+def touching_tip(tissue_mm: np.ndarray, through_mm: np.ndarray, axis: np.ndarray, radius_mm: float,
+                 spacing_mm: float) -> np.ndarray | None:
+    """The bar's tip on the line through ``through_mm`` along the unit ``axis``, touching the
+    tissue: one spacing (where the contact force of Eq. 18 begins) before the first tissue
+    particle under the bar's end face; ``None`` when no particle is under it.
+
+    A gap would let the force accelerate the bar freely and strike the tissue (its work
+    F × gap turned into an impact), which a slow push does not do; a tip inside the tissue
+    would start the push with a spurious compression."""
+    rel = np.asarray(tissue_mm, float) - through_mm
+    along = rel @ axis
+    across = np.linalg.norm(rel - along[:, None] * axis, axis=1)
+    under = across <= radius_mm
+    if not under.any():
+        return None
+    return np.asarray(through_mm, float) + (along[under].min() - spacing_mm) * axis
+
+
+def spacing_for_count(fill, spacing_mm: float, count: int, shrink: float = 0.99, tolerance: float = 1.0):
+    """Shrink ``spacing_mm`` until ``fill(spacing)`` holds at least ``tolerance × count`` particles.
+
+    A lattice misses a little of a curved surface, so the spacing that a volume and a count
+    imply gives too few; ``fill`` returns the particles (any sized sequence, or a tuple
+    whose first item is). Returns ``(spacing, fill(spacing))``."""
+    def size(result):
+        return len(result[0] if isinstance(result, tuple) else result)
+
+    result = fill(spacing_mm)
+    for _ in range(2000):
+        if size(result) >= tolerance * count:
+            return spacing_mm, result
+        spacing_mm *= shrink
+        result = fill(spacing_mm)
+    raise InputError(f"no spacing gives {count} particles", "particles")
+
+
 def bar_particles_mm(cfg: BarConfig, tissue_mm: np.ndarray, spacing_mm: float
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bar particles (mm), its unit axis and its tip (mm)."""
     axis = np.asarray(cfg.direction, float)
     axis /= np.linalg.norm(axis)
     if cfg.tip_mm is None:
-        # touching the tissue, on the axis through its centre: one spacing (where the contact
-        # force of Eq. 18 begins) before the first tissue particle under the bar's end face. A
-        # gap would let the force accelerate the bar freely and strike the tissue (its work
-        # F × gap turned into an impact), which a slow push does not do.
+        # touching the tissue, on the axis through its centre
         centre = tissue_mm.mean(0)
-        rel = tissue_mm - centre
-        along = rel @ axis
-        across = np.linalg.norm(rel - along[:, None] * axis, axis=1)
-        under = across <= cfg.radius_mm
-        first = along[under].min() if under.any() else along.min()
-        tip = centre + (first - 1.0 * spacing_mm) * axis
+        tip = touching_tip(tissue_mm, centre, axis, cfg.radius_mm, spacing_mm)
+        if tip is None:
+            tip = centre + (((tissue_mm - centre) @ axis).min() - spacing_mm) * axis
     else:
         tip = np.asarray(cfg.tip_mm, float)
     r, length = cfg.radius_mm, cfg.length_mm

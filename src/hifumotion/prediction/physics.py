@@ -5,12 +5,8 @@ model's displacement since frame 0: a pixel q is inside when its material point
 ``X = q − u_t(q)`` is inside the reference shape (see
 :func:`~hifumotion.particles.section.displacement_at`). The reference shape
 (:class:`ReferenceShape`) is the frame-0 contour in the imaging plane, continued
-out of the plane by the reconstructed tissue, so a tissue that moves across the
-plane brings its neighbouring section into view:
-
-    d(X) = d₀(X_plane) + [d_rec(X) − d_rec(X projected onto the plane)]   (mm, > 0 inside)
-
-with d₀ the signed distance to the frame-0 contour and d_rec the reconstruction's.
+out of the plane by the reconstructed tissue (:mod:`hifumotion.estimation.reference`),
+so a tissue that moves across the plane brings its neighbouring section into view.
 
 The aim point is a material point — by default the frame-0 centroid — carried by
 the same displacement: where the focus should go in each frame.
@@ -21,53 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
-
 from hifumotion.estimation.model import ModelRun, ModelSpec, Parameters, run_model
-from hifumotion.estimation.objective import signed_distance_px
-from hifumotion.particles.section import Plane, displacement_at
-
-
-@dataclass
-class ReferenceShape:
-    """The tissue at frame 0 as a signed distance (mm, positive inside) in the tank frame.
-
-    Attributes
-    ----------
-    frame0_mask
-        The target in the imaging plane at frame 0 (observed grid).
-    plane
-        The imaging plane.
-    rec_distance_mm, rec_voxel_mm, rec_origin_mm
-        The reconstruction's signed distance grid ``(Z, Y, X)`` in the tank frame
-        (``None``: the in-plane shape only).
-    """
-
-    frame0_mask: np.ndarray
-    plane: Plane
-    rec_distance_mm: np.ndarray | None = None
-    rec_voxel_mm: float = 1.0
-    rec_origin_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    def __post_init__(self):
-        self._d0 = signed_distance_px(self.frame0_mask) * self.plane.pixel_mm
-
-    def _rec(self, p: np.ndarray) -> np.ndarray:
-        idx = (p[:, ::-1] - np.asarray(self.rec_origin_mm)[::-1]) / self.rec_voxel_mm
-        return ndimage.map_coordinates(self.rec_distance_mm, idx.T, order=1, mode="nearest")
-
-    def distance(self, points_mm: np.ndarray) -> np.ndarray:
-        p = np.asarray(points_mm, float).reshape(-1, 3)
-        xy = self.plane.to_pixels(p)
-        d = ndimage.map_coordinates(self._d0, [xy[:, 1], xy[:, 0]], order=1, mode="nearest")
-        if self.rec_distance_mm is not None:
-            normal = np.cross(np.asarray(self.plane.u, float), np.asarray(self.plane.v, float))
-            off = (p - np.asarray(self.plane.origin_mm, float)) @ normal
-            d = d + self._rec(p) - self._rec(p - off[:, None] * normal)
-        return d
-
-    def inside(self, points_mm: np.ndarray) -> np.ndarray:
-        return self.distance(points_mm) > 0
+from hifumotion.estimation.reference import ReferenceShape
+from hifumotion.particles.section import displacement_at
 
 
 def predicted_mask(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float,
@@ -118,4 +70,4 @@ def predict_frames(spec: ModelSpec, k: Parameters, reference: ReferenceShape, fr
     return Prediction(masks, aim, aim0 * plane.pixel_mm, run, float(plane.pixel_mm))
 
 
-__all__ = ["ReferenceShape", "predicted_mask", "Prediction", "aim_point_px", "predict_frames"]
+__all__ = ["predicted_mask", "Prediction", "aim_point_px", "predict_frames"]

@@ -67,7 +67,8 @@ def output_links(out: str | Path, extra: dict | None = None) -> dict:
              out / "calibration" / "observation" / "tissue_volume.nii.gz",
              "calibration/parameters.json — fitted parameters": out / "calibration" / "parameters.json",
              "prediction/aim.csv — where to aim, every frame": out / "prediction" / "aim.csv",
-             "scores/table4.csv — per-frame scores": out / "scores" / "table4.csv"}
+             "scores/table4.csv — per-frame scores": out / "scores" / "table4.csv",
+             "observed/frames.nii.gz — the time series as read (3D Slicer)": out / "observed" / "frames.nii.gz"}
     links.update(extra or {})
     return links
 
@@ -216,17 +217,40 @@ def _aim_parts(outcome, inputs: ReportInputs, folder: Path) -> list[str]:
 
 
 def _paraview_parts(links: dict, folder: Path) -> list[str]:
-    items = "".join(f'<li><a href="{_rel(p, folder)}">{label}</a></li>' for label, p in links.items() if Path(p).exists())
-    return [f"<ul>{items}</ul>",
-            "<p><b>ParaView</b>: File → Open → <code>prediction/tissue.pvd</code> (the fitted model's tissue "
-            "particles, every predicted frame, with <code>displacement_mm</code>), Apply; choose "
-            "<i>Point Gaussian</i> or <i>Points</i> as the representation and colour by "
-            "<code>displacement_magnitude_mm</code>; press Play. The twin's own particles are in "
-            "<code>experiment/truth/particles/frames.pvd</code>; the reconstructed surface is "
-            "<code>calibration/observation/tissue.vtp</code>.</p>"
-            "<p><b>3D Slicer</b>: drag <code>calibration/observation/tissue_volume.nii.gz</code> (the reconstructed "
-            "tissue as a label volume) and <code>tissue.stl</code> into Slicer; the time series is "
-            "<code>experiment/observed/frames.nii.gz</code> (a 2D+t volume; open it with the Sequences module).</p>"]
+    """Links to the files worth opening and how to open them — only the files this run wrote."""
+    root = folder.parent                     # the report lives in OUTPUT/report
+    there = {label: Path(p) for label, p in links.items() if Path(p).exists()}
+    items = "".join(f'<li><a href="{_rel(p, folder)}">{label}</a></li>' for label, p in there.items())
+
+    def code(path: Path) -> str:
+        return f"<code>{Path(os.path.relpath(path.resolve(), root.resolve())).as_posix()}</code>"
+
+    def first(*names: str) -> Path | None:
+        return next((root / n for n in names if (root / n).exists()), None)
+
+    parts = [f"<ul>{items}</ul>"]
+    model, twin = first("prediction/tissue.pvd"), first("experiment/truth/particles/frames.pvd")
+    surface, volume = first("calibration/observation/tissue.vtp"), first("calibration/observation/tissue_volume.nii.gz")
+    frames = first("observed/frames.nii.gz", "experiment/observed/frames.nii.gz")
+    paraview = []
+    if model is not None:
+        paraview.append(f"File → Open → {code(model)} (the fitted model's tissue particles, every predicted frame, "
+                        "with <code>displacement_mm</code>), Apply; choose <i>Point Gaussian</i> or <i>Points</i> as "
+                        "the representation and colour by <code>displacement_magnitude_mm</code>; press Play.")
+    if twin is not None:
+        paraview.append(f"The twin's own particles are in {code(twin)}.")
+    if surface is not None:
+        paraview.append(f"The reconstructed surface is {code(surface)}.")
+    if paraview:
+        parts.append("<p><b>ParaView</b>: " + " ".join(paraview) + "</p>")
+    slicer = []
+    if volume is not None:
+        slicer.append(f"drag {code(volume)} (the reconstructed tissue as a label volume) into Slicer.")
+    if frames is not None:
+        slicer.append(f"The time series is {code(frames)} (a 2D+t volume; open it with the Sequences module).")
+    if slicer:
+        parts.append("<p><b>3D Slicer</b>: " + " ".join(slicer) + "</p>")
+    return parts
 
 
 def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: ReportInputs) -> Path:

@@ -17,7 +17,6 @@ One documented order (each step's folder inside the output):
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -56,39 +55,33 @@ def default_dataset() -> Path | None:
     return None
 
 
-def sweep_dataset(twin: str | Path, folder: str | Path, planes: int = 4, clicks: int = 8, error_mm: float = 0.6,
+def sweep_dataset(twin, folder: str | Path, planes: int = 4, clicks: int = 8, error_mm: float = 0.6,
                   seed: int = 0) -> Path:
     """A segmentation dataset (``images/``, ``masks/``, ``init.json``) from a twin's sweep.
 
-    The ``planes`` sweep planes nearest the middle of the tissue, their true sections as
-    masks, and a clinician's rough clicks on each (``clicks`` points along the true boundary,
-    each off by a normal radial error of ``error_mm``) as the common initial contour."""
-    import shutil
-
+    ``twin`` is a :class:`~hifumotion.experiment.TwinResult`. The ``planes`` sweep planes
+    nearest the middle of the tissue, their true sections as masks, and a clinician's rough
+    clicks on each (``clicks`` points along the true boundary, each off by a normal radial
+    error of ``error_mm``) as the common initial contour."""
     from hifumotion.contour import Contour
     from hifumotion.experiment.twin import clinician_contour
     from hifumotion.io import write_json
-    from hifumotion.io.files import atomic_path
-    from hifumotion.io.raster import read_raster_array
-    from hifumotion.io.writers import write_mask_png
+    from hifumotion.io.writers import write_mask_png, write_png_stack
 
-    twin, folder = Path(twin), Path(folder)
-    setup = json.loads((twin / "observed" / "setup.json").read_text())
-    pixel = float(setup["imaging"]["pixel_mm"])
-    paths = sorted((twin / "truth" / "sweep").glob("slice_*.png"))
-    sections = [read_raster_array(p)[0] > 0 for p in paths]        # the end planes are empty
-    area = np.array([m.sum() for m in sections])
+    folder = Path(folder)
+    pixel = twin.probe.pixel_mm
+    sections = np.asarray(twin.sweep_masks, bool)          # the end planes are empty
+    area = sections.sum(axis=(1, 2))
     tissue = np.flatnonzero(area > 0.25 * area.max())
     middle = tissue[np.argsort(np.abs(tissue - tissue.mean()))[:planes]]
     rng = np.random.default_rng(seed)
     init = {}
     for i in sorted(middle):
-        name = paths[i].name
+        name = f"slice_{i:03d}.png"
         contour = Contour.from_mask(sections[i], pixel)
         points = clinician_contour(contour.points_px * pixel, clicks, error_mm, rng) / pixel
         init[name] = {"points": points.round(2).tolist()}
-        with atomic_path(folder / "images" / name) as tmp:
-            shutil.copyfile(twin / "observed" / "sweep" / name, tmp)
+        write_png_stack(folder / "images", twin.sweep[i:i + 1], prefix="slice_", start=int(i), digits=3)
         write_mask_png(folder / "masks" / name, sections[i])
     write_json(folder / "init.json", init)
     return folder
@@ -112,7 +105,6 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.io.dataset import Dataset, load_dataset
     from hifumotion.report.build import ReportInputs, SegmentationResult, output_links, write_report
-    from hifumotion.scoring import read_frame_masks
     from hifumotion.segmentation import METHODS
     from hifumotion.segmentation.compare import compare_methods, write_comparison
 
@@ -120,13 +112,13 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
     cfg = twin_config(settings.preset, seed=settings.seed)
     twin = out / "experiment"
     with record.stage("experiment: generate the synthetic twin"):
-        generate_twin(cfg, twin, progress=tell)
-    truth_params = json.loads((twin / "truth" / "parameters.json").read_text())
+        result = generate_twin(cfg, twin, progress=tell)
+    truth_params = result.parameters
 
     segmentation = []
     methods = list(METHODS)
     with record.stage("segmentation: six methods on the twin's sweep"):
-        data = load_dataset(sweep_dataset(twin, out / "segmentation" / "sweep_dataset", settings.sweep_planes,
+        data = load_dataset(sweep_dataset(result, out / "segmentation" / "sweep_dataset", settings.sweep_planes,
                                           seed=settings.seed))
         cmp = compare_methods(data, methods, "points", progress=_items(tell, "segmentation (sweep)"))
         paths = write_comparison(cmp, out / "segmentation", tag="_sweep")
@@ -154,10 +146,11 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
             offset = measure_boundary_offset(cfg.imaging, "glcv", seed=settings.seed + 7919)
         estimation.boundary_offset_mm = round(offset.offset_mm, 3)
     record.config["estimation"] = estimation.model_dump(mode="json")
-    truth = read_frame_masks(twin / "truth")
-    outcome = run_pipeline(twin / "observed", out, estimation, truth_masks=truth, truth_kind="twin's true sections",
-                           truth_parameters=truth_params, record=record, progress=tell)
-    motion = json.loads((twin / "truth" / "motion.json").read_text())
+    truth = {f: m for f, m in enumerate(result.frame_masks)}
+    outcome = run_pipeline(result.observed, out, estimation, truth_masks=truth, truth_kind="twin's true sections",
+                           truth_parameters=truth_params, record=record, progress=tell,
+                           observed_dir=twin / "observed")
+    motion = result.motion
     with record.stage("report"):
         inputs = ReportInputs(
             title="hifumotion demo: the synthetic experiment end to end",

@@ -30,6 +30,8 @@ import numpy as np
 from pydantic import Field
 
 from hifumotion.config import ConfigModel
+from hifumotion.observed import Observed
+from hifumotion import paper
 
 Progress = Callable[[str, float], None]
 
@@ -43,8 +45,8 @@ class EstimationConfig(ConfigModel):
         None, description="training frames, '20,30,40' or '20:101:10' (default: the paper's protocol scaled to the series)")
     validation_frames: str | None = Field(
         None, description="validation frames, same forms (default: the paper's protocol scaled to the series)")
-    force_n: float = Field(0.25, gt=0, description="nominal pushing force in N (the data fix only F/E)")
-    particles: int = Field(4399, ge=100, description="tissue particles of the fitted model (the paper: 4,399)")
+    force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
+    particles: int = Field(paper.TISSUE_PARTICLES, ge=100, description="tissue particles of the fitted model (the paper: 4,399)")
     search_particles: int = Field(1000, ge=100, description="tissue particles of the coarser model the search runs on")
     max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
@@ -75,11 +77,16 @@ class PipelineOutcome:
         return self.predict_s / window if window > 0 else float("nan")
 
 
-def run_pipeline(observed_dir: str | Path, out: str | Path, settings: EstimationConfig | None = None,
+def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: EstimationConfig | None = None,
                  contours_csv: str | Path | None = None, truth_masks: dict | None = None,
                  truth_kind: str = "expert masks", truth_parameters: dict | None = None,
-                 record=None, progress: Progress | None = None) -> PipelineOutcome:
-    """Steps 1–4 of the module docstring on ``observed_dir``; outputs under ``out``.
+                 record=None, progress: Progress | None = None,
+                 observed_dir: str | Path | None = None) -> PipelineOutcome:
+    """Steps 1–4 of the module docstring on ``observed``; outputs under ``out``.
+
+    ``observed`` is an :class:`~hifumotion.observed.Observed` in memory, or an ``observed/``
+    folder to read; ``observed_dir``, where an in-memory one was written (the calibration
+    records it).
 
     ``truth_masks`` (frame → bool mask) is what the scores are measured against; a twin's
     ``truth_parameters`` (``truth/parameters.json``) puts the truth beside the fit.
@@ -92,7 +99,7 @@ def run_pipeline(observed_dir: str | Path, out: str | Path, settings: Estimation
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import default_frames, parse_frames
     from hifumotion.estimation.store import save_calibration
-    from hifumotion.experiment.observed import load_observed
+    from hifumotion.observed import load_observed
     from hifumotion.io import write_json
     from hifumotion.io.files import write_text
     from hifumotion.prediction.evaluate import evaluate, online_schedule
@@ -103,7 +110,9 @@ def run_pipeline(observed_dir: str | Path, out: str | Path, settings: Estimation
     out = Path(out)
     tell = progress or (lambda stage, fraction: None)
     stage = record.stage if record is not None else (lambda name: nullcontext())
-    observed = load_observed(observed_dir)
+    if not isinstance(observed, Observed):
+        observed_dir = observed
+        observed = load_observed(observed)
     n = len(observed.frames)
     auto_train, auto_valid = default_frames(n)
     training = parse_frames(s.training_frames, n, "estimation.training_frames") or auto_train

@@ -5,15 +5,13 @@ a folder of PNGs, or a video), the clicked initial contour, where the images sit
 pool, the pool and the bar, and how to estimate (``[estimation]``, see
 :class:`~hifumotion.workflow.pipeline.EstimationConfig`). :func:`assemble_observed`
 turns it into the ``observed/`` layout the pipeline reads (the same the synthetic
-experiment writes, :mod:`hifumotion.experiment.observed`); :func:`run_user` runs the
+experiment writes, :mod:`hifumotion.observed`); :func:`run_user` runs the
 pipeline and writes the report. Lengths in mm, times in s; relative paths are relative
 to the configuration file. ``hifumotion run --example`` prints a complete example.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 from typing import Callable
 
@@ -22,6 +20,8 @@ from pydantic import Field, model_validator
 
 from hifumotion.config import ConfigModel
 from hifumotion.errors import InputError
+from hifumotion.observed import BarSetup, ImagingGeometry, PushSchedule, Setup, TankSetup
+from hifumotion.observed.setup import check_bar_in_tank
 from hifumotion.workflow.pipeline import EstimationConfig, outcome_summary, run_pipeline
 
 Progress = Callable[[str, float], None]
@@ -53,21 +53,6 @@ class GeometryConfig(ConfigModel):
     frames_plane_z_mm: float = Field(description="pool z in mm of the time series' imaging plane")
 
 
-class TankSetup(ConfigModel):
-    size_mm: tuple[float, float, float] = Field(description="inner size of the pool (x, y up, z) in mm")
-    water_depth_mm: float = Field(ge=0, description="water above the floor in mm")
-
-
-class BarSetup(ConfigModel):
-    enabled: bool = Field(True, description="whether a bar pushes the tissue")
-    radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar in mm")
-    length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
-    direction: tuple[float, float, float] = Field((0.0, -1.0, 0.0), description="unit vector the bar pushes along")
-    tip_at_rest_mm: tuple[float, float, float] = Field(description="pool position of the bar's tip before the push, mm")
-    force_ramp_s: float = Field(0.0, ge=0, description="time over which the push rises to its full force, s")
-    weight_supported: bool = Field(True, description="a hand carries the bar's weight")
-
-
 class TruthConfig(ConfigModel):
     masks: Path | None = Field(None, description="folder of expert masks frame_NNNN.png (0/255) on the frames' grid, to score against")
 
@@ -82,6 +67,7 @@ class RunConfig(ConfigModel):
     geometry: GeometryConfig
     tank: TankSetup
     bar: BarSetup
+    push: PushSchedule = Field(default_factory=PushSchedule, description="the shape of the push's force schedule")
     estimation: EstimationConfig = EstimationConfig()
     training_contours: Path | None = Field(None, description="CSV of expert contours of training frames (frame, x_px, y_px), used instead of GLCV tracking")
     truth: TruthConfig = TruthConfig()
@@ -90,55 +76,31 @@ class RunConfig(ConfigModel):
     def _positions(self):
         if self.sweep.positions_mm is not None and len(self.sweep.positions_mm) < 2:
             raise ValueError("sweep.positions_mm needs at least two planes")
+        check_bar_in_tank(self.bar, self.tank)
         return self
 
 
-EXAMPLE = '''# hifumotion run configuration: lengths in mm, times in s; paths relative to this file.
-output = "results"
+def example_config() -> RunConfig:
+    """A complete, valid run configuration (the one ``hifumotion run --example`` prints)."""
+    return RunConfig(
+        output=Path("results"),
+        sweep=SweepConfig(path=Path("sweep/"), spacing_mm=0.2, gap_mm=1.0, first_z_mm=4.7),
+        frames=FramesConfig(path=Path("cine.dcm"), frame_interval_s=0.05),
+        initial_contour=ContourConfig(path=Path("initial_contour.csv"), frame=0),
+        geometry=GeometryConfig(row0_col0_mm=(1.0, -8.0), frames_plane_z_mm=18.7),
+        tank=TankSetup(size_mm=(44.0, 40.0, 36.0), water_depth_mm=6.0),
+        bar=BarSetup(radius_mm=6.0, length_mm=12.0, direction=(0.0, -1.0, 0.0), tip_at_rest_mm=(22.6, 19.0, 18.7)),
+        push=PushSchedule(shape="ramp_hold", ramp_s=0.5),
+        estimation=EstimationConfig(training_frames="20:101:10", validation_frames="110:191:10"))
 
-[sweep]                      # parallel planes through the resting tissue
-path = "sweep/"              # a folder of PNGs, a DICOM series, or sweep.nii.gz / .mha / .nrrd
-spacing_mm = 0.2             # pixel size (PNGs carry none)
-gap_mm = 1.0                 # distance between planes (when the file gives no positions)
-first_z_mm = 4.7             # pool z of the first plane
 
-[frames]                     # the imaging plane's time series during the push
-path = "cine.dcm"            # DICOM cine, 2D+t NIfTI/MHA, a PNG folder or a video
-frame_interval_s = 0.05      # if the file carries none
+def example_text() -> str:
+    """:func:`example_config` as TOML, every field with its description (and unit) as a comment."""
+    from hifumotion.config import dump_toml
 
-[initial_contour]
-path = "initial_contour.csv" # frame, x_px, y_px: points clicked around the target
-frame = 0
-
-[geometry]                   # where the images are in the pool (y up, floor at 0)
-row0_col0_mm = [1.0, -8.0]   # pool (x, y) of pixel (0, 0); rows run up from the probe
-frames_plane_z_mm = 18.7
-
-[tank]
-size_mm = [44.0, 40.0, 36.0]
-water_depth_mm = 6.0
-
-[bar]
-radius_mm = 6.0
-length_mm = 12.0
-direction = [0.0, -1.0, 0.0]
-tip_at_rest_mm = [22.6, 19.0, 18.7]
-force_ramp_s = 0.5
-
-[estimation]
-method = "least_squares"     # or "cmaes", "table1" (the paper's algorithm)
-training_frames = "20:101:10"
-validation_frames = "110:191:10"
-particles = 4399
-search_particles = 1000
-max_evaluations = 8
-horizons_frames = [4, 6, 8]
-boundary_offset_mm = 0.0     # your system's segmentation bias, from a phantom of known size
-
-# training_contours = "expert_contours.csv"   # a physician's contours instead of GLCV tracking
-# [truth]
-# masks = "expert_masks/"                      # frame_NNNN.png masks to score the prediction against
-'''
+    return ("# hifumotion run configuration: lengths in mm, times in s; paths relative to this file.\n"
+            "# Fields shown as '(not set)' are optional: remove the '#' and give a value to set them.\n\n"
+            + dump_toml(example_config()))
 
 
 def load_run_config(path: str | Path) -> tuple[RunConfig, Path]:
@@ -170,9 +132,11 @@ def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
     """Write the ``observed/`` layout (``setup.json``, ``sweep/``, ``frames/``, ``sweep_positions.csv``,
     ``initial_contour.csv``) from the user's files; every missing or inconsistent piece is one
     :class:`~hifumotion.errors.InputError` naming the file or field."""
-    from hifumotion.io import read_sequence, write_json
-    from hifumotion.io.files import write_text
-    from hifumotion.io.writers import read_contours_csv, write_contours_csv, write_png_stack
+    from pydantic import ValidationError
+
+    from hifumotion.io import read_sequence
+    from hifumotion.io.writers import read_contours_csv
+    from hifumotion.observed import write_observed
 
     folder = Path(folder)
     sweep_path, frames_path = _resolve(base, cfg.sweep.path), _resolve(base, cfg.frames.path)
@@ -214,27 +178,21 @@ def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
         raise InputError(f"no contour of frame {cfg.initial_contour.frame} (initial_contour.frame); frames given: "
                          f"{', '.join(contours)}", contour_path)
 
-    write_png_stack(folder / "sweep", _as_uint8(sweep.frames, cfg.sweep.flip_rows), prefix="slice_", digits=3)
-    write_png_stack(folder / "frames", _as_uint8(frames.frames, cfg.frames.flip_rows), prefix="frame_", digits=4)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["slice", "z_mm"])
-    w.writerows([i, f"{v:.6f}"] for i, v in enumerate(z))
-    write_text(folder / "sweep_positions.csv", buf.getvalue())
-    write_contours_csv(folder / "initial_contour.csv", {cfg.initial_contour.frame: wanted[0]})
-    pixel = float(frames.spacing_mm[0])
-    write_json(folder / "setup.json", {
-        "description": "assembled by hifumotion run from the user's files",
-        "frame_interval_s": float(frames.frame_interval_s), "frames": int(len(frames.frames)),
-        "initial_contour_frame": cfg.initial_contour.frame,
-        "imaging": {"image_shape": list(frames.frames.shape[1:]), "pixel_mm": pixel,
-                    "column_axis": [1.0, 0.0, 0.0], "row_axis": [0.0, 1.0, 0.0],
-                    "row0_col0_mm": list(cfg.geometry.row0_col0_mm),
-                    "frames_plane_z_mm": cfg.geometry.frames_plane_z_mm, "sweep_z_mm": z.tolist()},
-        "tank": cfg.tank.model_dump(mode="json"),
-        "bar": cfg.bar.model_dump(mode="json"),
-        "sources": {"sweep": str(sweep_path), "frames": str(frames_path)},
-    })
+    try:
+        setup = Setup(
+            description="assembled by hifumotion run from the user's files",
+            frame_interval_s=float(frames.frame_interval_s), frames=int(len(frames.frames)),
+            initial_contour_frame=cfg.initial_contour.frame,
+            imaging=ImagingGeometry(image_shape=tuple(frames.frames.shape[1:]), pixel_mm=float(frames.spacing_mm[0]),
+                                    row0_col0_mm=tuple(cfg.geometry.row0_col0_mm),
+                                    frames_plane_z_mm=cfg.geometry.frames_plane_z_mm, sweep_z_mm=z.tolist()),
+            tank=cfg.tank, bar=cfg.bar, push=cfg.push,
+            sources={"sweep": str(sweep_path), "frames": str(frames_path)})
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise InputError(f"{err['msg']}", ".".join(str(p) for p in err["loc"]) or "configuration") from None
+    write_observed(folder, setup, _as_uint8(sweep.frames, cfg.sweep.flip_rows), z,
+                   _as_uint8(frames.frames, cfg.frames.flip_rows), wanted[0])
     return folder
 
 
@@ -259,4 +217,4 @@ def run_user(cfg: RunConfig, base: Path, out: Path, record, progress: Progress |
     return summary
 
 
-__all__ = ["RunConfig", "EXAMPLE", "load_run_config", "assemble_observed", "run_user"]
+__all__ = ["RunConfig", "example_config", "example_text", "load_run_config", "assemble_observed", "run_user"]

@@ -7,9 +7,10 @@ from typing import Optional
 
 import typer
 
-from hifumotion.cli import app
+from hifumotion.cli.app import app
 from hifumotion.console import console
 from hifumotion.errors import InputError
+from hifumotion import paper
 
 
 @app.command()
@@ -19,8 +20,8 @@ def calibrate(
     method: str = typer.Option("least_squares", "--method", help="least_squares (default), cmaes, or table1 (the paper's iterative algorithm)."),
     training: Optional[str] = typer.Option(None, "--training", help="Training frames: '20,30,40' or '20:101:10' (default: the paper's protocol)."),
     contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of GLCV tracking."),
-    force: float = typer.Option(0.25, "--force", help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
-    particles: int = typer.Option(4399, "--particles", help="Tissue particles of the fitted model (the paper: 4,399)."),
+    force: float = typer.Option(paper.FORCE_N, "--force", help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
+    particles: int = typer.Option(paper.TISSUE_PARTICLES, "--particles", help="Tissue particles of the fitted model (the paper: 4,399)."),
     search_particles: int = typer.Option(1000, "--search-particles", help="Tissue particles of the coarser model the search runs on."),
     max_evaluations: int = typer.Option(8, "--max-evaluations", help="Least squares: residual evaluations (each with a p-run Jacobian)."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Dask worker processes of the local cluster (default: the cores)."),
@@ -38,7 +39,7 @@ def calibrate(
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import parse_frames
     from hifumotion.estimation.store import save_calibration
-    from hifumotion.experiment.observed import load_observed
+    from hifumotion.observed import load_observed
     from hifumotion.io import output_folder
     from hifumotion.run_info import RunRecord
 

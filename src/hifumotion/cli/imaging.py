@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from hifumotion.cli import app
+from hifumotion.cli.app import app
 from hifumotion.console import console
 from hifumotion.errors import InputError
 

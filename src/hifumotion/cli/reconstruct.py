@@ -8,7 +8,7 @@ from typing import Optional
 import numpy as np
 import typer
 
-from hifumotion.cli import app, parse_spacing
+from hifumotion.cli.app import app, parse_spacing
 from hifumotion.console import console, log
 from hifumotion.errors import InputError
 

@@ -11,7 +11,7 @@ from typing import Optional
 
 import typer
 
-from hifumotion.cli import app
+from hifumotion.cli.app import app
 from hifumotion.console import console
 from hifumotion.errors import InputError
 
@@ -73,10 +73,10 @@ def run(
     from hifumotion.console import StageBars
     from hifumotion.io import output_folder
     from hifumotion.run_info import RunRecord
-    from hifumotion.workflow.user_run import EXAMPLE, load_run_config, run_user
+    from hifumotion.workflow.user_run import example_text, load_run_config, run_user
 
     if example:
-        typer.echo(EXAMPLE, nl=False)        # plain stdout, unwrapped: meant for "> run.toml"
+        typer.echo(example_text(), nl=False)        # plain stdout, unwrapped: meant for "> run.toml"
         return
     if config is None:
         raise InputError("give a run configuration file (hifumotion run --example prints one)", "CONFIG")

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from hifumotion.cli import app
+from hifumotion.cli.app import app
 from hifumotion.console import console
 
 

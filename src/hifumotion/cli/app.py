@@ -1,0 +1,52 @@
+"""The ``hifumotion`` Typer application and the options its commands share.
+
+A leaf module: every ``hifumotion.cli.*`` command module imports :data:`app` from here
+and registers its commands on it; :func:`hifumotion.cli.main` imports them all.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import typer
+
+from hifumotion import __version__, console
+
+app = typer.Typer(
+    name="hifumotion",
+    help="Model and predict the movement and deformation of a HIFU target tissue.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"hifumotion {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="More detail (debug messages)."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Errors only; no progress bars."),
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+) -> None:
+    """hifumotion: segment, reconstruct, simulate, calibrate, predict."""
+    console.setup(verbose, quiet)
+
+
+def parse_spacing(text: Optional[str]) -> Optional[tuple[float, float]]:
+    """``"0.2"`` or ``"0.2,0.25"`` (row, col mm) → a spacing tuple; None stays None."""
+    if text is None:
+        return None
+    from hifumotion.errors import InputError
+    from hifumotion.sequence import as_spacing_mm
+
+    try:
+        values = [float(v) for v in text.replace("x", ",").split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"expected a number or 'row,col' in mm, got {text!r}", "--spacing") from None
+    return as_spacing_mm(values, "--spacing")

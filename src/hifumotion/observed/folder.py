@@ -1,0 +1,155 @@
+"""An ``observed/`` folder: what a HIFU device's user has, and nothing of the truth.
+
+Written by the synthetic twin (:func:`hifumotion.experiment.generate_twin`) and by
+``hifumotion run`` from a user's files, both through :func:`write_observed`; read by the
+estimation through :func:`load_observed`. Layout (lengths in mm, times in s)::
+
+    setup.json             the Setup (image geometry, frame interval, pool, bar, push shape)
+    sweep/slice_NNN.png    parallel planes through the resting tissue (8-bit B-mode)
+    sweep.nii.gz           the same as a 3D volume (3D Slicer)
+    sweep_positions.csv    slice, z_mm
+    frames/frame_NNNN.png  the imaging plane's time series during the push
+    frames.nii.gz          the same as 2D+t
+    initial_contour.csv    the clinician's clicked contour (frame, point, x_px, y_px, x_mm, y_mm)
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hifumotion.contour import Contour
+from hifumotion.errors import InputError
+from hifumotion.observed.setup import Setup, read_setup, write_setup
+
+
+@dataclass
+class Observed:
+    """An observed experiment.
+
+    Attributes
+    ----------
+    sweep
+        ``(S, H, W)`` uint8 B-mode images of parallel planes through the resting tissue.
+    sweep_z_mm
+        ``(S,)`` plane positions (mm, along the pool's z).
+    frames
+        ``(T, H, W)`` uint8 B-mode frames of the imaging plane during the push.
+    initial_contour
+        The clinician's contour on frame ``setup.initial_contour_frame``.
+    setup
+        What the operator knows (:class:`~hifumotion.observed.setup.Setup`).
+    """
+
+    sweep: np.ndarray
+    sweep_z_mm: np.ndarray
+    frames: np.ndarray
+    initial_contour: Contour
+    setup: Setup
+
+    @property
+    def frame_interval_s(self) -> float:
+        return self.setup.frame_interval_s
+
+    @property
+    def pixel_mm(self) -> float:
+        return self.setup.imaging.pixel_mm
+
+    @property
+    def initial_frame(self) -> int:
+        return self.setup.initial_contour_frame
+
+    @property
+    def times_s(self) -> np.ndarray:
+        return np.arange(len(self.frames)) * self.frame_interval_s
+
+
+def _stack(folder: Path, pattern: str, shape: tuple[int, int]) -> np.ndarray:
+    from hifumotion.io.raster import read_raster_array
+
+    files = sorted(folder.glob(pattern))
+    if not files:
+        raise InputError(f"no {pattern} images", folder)
+    images = []
+    for p in files:
+        image = read_raster_array(p)[0]
+        if image.ndim != 2 or image.shape != tuple(shape):
+            raise InputError(f"image of shape {image.shape}; setup.json's imaging.image_shape is {tuple(shape)}", p)
+        images.append(image)
+    return np.stack(images)
+
+
+def load_observed(folder: str | Path) -> Observed:
+    """Read ``folder`` (module docstring); a missing or malformed part is one clear error."""
+    from hifumotion.io.writers import read_contours_csv
+
+    root = Path(folder)
+    if not root.is_dir():
+        raise InputError("no such folder (expected an observed experiment: setup.json, sweep/, frames/)", root)
+    setup_path = root / "setup.json"
+    if not setup_path.is_file():
+        raise InputError("not an observed experiment folder (no setup.json)", root)
+    setup = read_setup(setup_path)
+    shape = setup.imaging.image_shape
+    sweep = _stack(root / "sweep", "slice_*.png", shape)
+    frames = _stack(root / "frames", "frame_*.png", shape)
+    if len(frames) != setup.frames:
+        raise InputError(f"{len(frames)} frame images; setup.json says frames = {setup.frames}", root / "frames")
+    pos_path = root / "sweep_positions.csv"
+    if not pos_path.is_file():
+        raise InputError("no such file", pos_path)
+    with open(pos_path, newline="", encoding="utf-8") as fh:
+        try:
+            z = np.array([float(r["z_mm"]) for r in csv.DictReader(fh)])
+        except (KeyError, ValueError, TypeError):
+            raise InputError("expected a z_mm column of numbers", pos_path) from None
+    if len(z) != len(sweep):
+        raise InputError(f"{len(z)} positions for {len(sweep)} sweep images", pos_path)
+    if not np.all(np.isfinite(z)) or (len(z) > 1 and not np.all(np.diff(z) > 0)):
+        raise InputError("the planes' z_mm must be finite and increasing", pos_path)
+    contours = read_contours_csv(root / "initial_contour.csv", spacing_mm=setup.pixel_mm)
+    wanted = [c for label, c in contours.items() if _frame_label(label) == setup.initial_contour_frame]
+    if not wanted:
+        raise InputError(f"no contour of frame {setup.initial_contour_frame} (setup.json's initial_contour_frame)",
+                         root / "initial_contour.csv")
+    return Observed(sweep, z, frames, wanted[0], setup)
+
+
+def _frame_label(label: str) -> int | None:
+    try:
+        return int(float(label))
+    except ValueError:
+        return None
+
+
+def write_observed(folder: str | Path, setup: Setup, sweep: np.ndarray, sweep_z_mm: np.ndarray,
+                   frames: np.ndarray, initial_contour: Contour) -> Path:
+    """Write the layout of the module docstring into ``folder``; ``sweep``/``frames`` are
+    uint8 ``(N, H, W)`` stacks on the grid of ``setup.imaging``."""
+    from hifumotion.io.files import write_text
+    from hifumotion.io.writers import write_contours_csv, write_nifti, write_png_stack
+
+    folder = Path(folder)
+    px = setup.pixel_mm
+    z = np.asarray(sweep_z_mm, float)
+    if len(z) != len(sweep) or len(frames) != setup.frames:
+        raise ValueError("the sweep's positions and the frames must match the setup")
+    write_png_stack(folder / "frames", frames, prefix="frame_", digits=4)
+    write_nifti(folder / "frames.nii.gz", frames, (px, px), frame_interval_s=setup.frame_interval_s)
+    write_png_stack(folder / "sweep", sweep, prefix="slice_", digits=3)
+    write_nifti(folder / "sweep.nii.gz", sweep, (px, px), slice_positions_mm=z)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["slice", "z_mm"])
+    w.writerows([i, f"{v:.6f}"] for i, v in enumerate(z))
+    write_text(folder / "sweep_positions.csv", buf.getvalue())
+    write_contours_csv(folder / "initial_contour.csv", {setup.initial_contour_frame: initial_contour})
+    write_setup(folder / "setup.json", setup)
+    return folder
+
+
+__all__ = ["Observed", "load_observed", "write_observed"]

@@ -1,0 +1,171 @@
+"""What ``setup.json`` holds: the operator's knowledge of the experiment, typed and versioned.
+
+One model, :class:`Setup`, written by the synthetic twin and by ``hifumotion run`` through
+:func:`write_setup` and read by everything downstream through :func:`read_setup`: the
+image geometry in the pool's frame, the frame interval, the pool, the bar and the *shape*
+of the push (how its force rises; not how large it is, which the estimation finds).
+
+Frame of reference: the pool's, in mm, y up, the floor at y = 0. Image rows run upwards
+from the probe (depth), columns along x; ``row0_col0_mm`` is the pool (x, y) of the centre
+of pixel (row 0, column 0) and a plane's z its position along the pool's z.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, field_validator, model_validator
+
+from hifumotion.config import ConfigModel, validate_config
+from hifumotion.errors import InputError
+
+#: The version of the ``setup.json`` layout this code writes and reads.
+SCHEMA_VERSION = 1
+
+Vector3 = tuple[float, float, float]
+
+
+class ImagingGeometry(ConfigModel):
+    """Where the images lie in the pool."""
+
+    image_shape: tuple[int, int] = Field(description="rows, columns of every image (px)")
+    pixel_mm: float = Field(gt=0, le=10, description="square pixel size (mm)")
+    column_axis: Vector3 = Field((1.0, 0.0, 0.0), description="pool direction of increasing column")
+    row_axis: Vector3 = Field((0.0, 1.0, 0.0), description="pool direction of increasing row (up, away from the probe)")
+    row0_col0_mm: tuple[float, float] = Field(description="pool (x, y) of the centre of pixel (row 0, column 0), mm")
+    frames_plane_z_mm: float = Field(description="pool z of the time series' imaging plane (mm)")
+    sweep_z_mm: list[float] = Field(default_factory=list, description="pool z of each sweep plane (mm)")
+
+    @field_validator("image_shape")
+    @classmethod
+    def _shape(cls, v):
+        if min(v) < 8:
+            raise ValueError("images must be at least 8 × 8 px")
+        return v
+
+    @model_validator(mode="after")
+    def _axes(self):
+        if not (np.allclose(self.column_axis, (1, 0, 0)) and np.allclose(self.row_axis, (0, 1, 0))):
+            raise ValueError("only planes with columns along x and rows along y (z = the plane's position) "
+                             "are supported")
+        return self
+
+
+class TankSetup(ConfigModel):
+    """The water pool."""
+
+    size_mm: Vector3 = Field(description="inner size of the pool (x, y up, z) in mm")
+    water_depth_mm: float = Field(ge=0, description="water above the floor in mm")
+
+    @field_validator("size_mm")
+    @classmethod
+    def _positive(cls, v):
+        if any(not (s > 0) for s in v):
+            raise ValueError("every side of the pool must be positive (mm)")
+        return v
+
+
+class BarSetup(ConfigModel):
+    """The pushing bar: a rigid cylinder, its end face the tip."""
+
+    enabled: bool = Field(True, description="whether a bar pushes the tissue")
+    radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar in mm")
+    length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
+    direction: Vector3 = Field((0.0, -1.0, 0.0), description="direction the bar pushes along (normalised on reading)")
+    tip_at_rest_mm: Vector3 = Field(description="pool position of the bar's tip before the push, mm")
+    weight_supported: bool = Field(True, description="a hand carries the bar's weight")
+
+    @field_validator("direction")
+    @classmethod
+    def _unit(cls, v):
+        n = float(np.linalg.norm(v))
+        if not n > 0 or not np.isfinite(n):
+            raise ValueError("the bar's direction must be a non-zero vector")
+        return tuple(float(c) / n for c in v)
+
+
+class PushSchedule(ConfigModel):
+    """The shape of the force's schedule (its magnitude is what the estimation finds)."""
+
+    shape: Literal["ramp_hold"] = Field("ramp_hold", description="ramp_hold: a linear rise over ramp_s, then held")
+    ramp_s: float = Field(0.0, ge=0, description="duration of the rise (s)")
+
+
+def check_bar_in_tank(bar: BarSetup, tank: TankSetup) -> None:
+    """Raise ``ValueError`` when an enabled bar's tip lies outside the pool."""
+    if bar.enabled:
+        tip = np.asarray(bar.tip_at_rest_mm)
+        if np.any(tip < -1e-9) or np.any(tip > np.asarray(tank.size_mm) + 1e-9):
+            raise ValueError(f"the bar's tip {tuple(bar.tip_at_rest_mm)} mm is outside the pool "
+                             f"(0 … {tuple(tank.size_mm)} mm)")
+
+
+class Setup(ConfigModel):
+    """The contents of ``setup.json`` (see the module docstring)."""
+
+    schema_version: Literal[1] = Field(SCHEMA_VERSION, description="version of this layout")
+    description: str = Field("", description="free text")
+    frame_interval_s: float = Field(gt=0, description="time between frames (s)")
+    frames: int = Field(ge=2, description="number of frames of the time series")
+    initial_contour_frame: int = Field(0, ge=0, description="the frame the clicked contour outlines")
+    frame_files: str = Field("frames/frame_%04d.png", description="file pattern of the frames")
+    sweep_files: str = Field("sweep/slice_%03d.png", description="file pattern of the sweep's planes")
+    imaging: ImagingGeometry
+    tank: TankSetup
+    bar: BarSetup
+    push: PushSchedule = Field(default_factory=PushSchedule, description="the force's schedule, shape only")
+    sources: dict[str, str] = Field(default_factory=dict, description="where the images came from")
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if self.initial_contour_frame >= self.frames:
+            raise ValueError(f"initial_contour_frame {self.initial_contour_frame} is not one of the "
+                             f"{self.frames} frames")
+        check_bar_in_tank(self.bar, self.tank)
+        return self
+
+    @property
+    def pixel_mm(self) -> float:
+        return self.imaging.pixel_mm
+
+    @property
+    def image_origin_mm(self) -> np.ndarray:
+        """``(3,)`` pool position of the image origin, pixel (0, 0), at z = 0 (mm)."""
+        x0, y0 = self.imaging.row0_col0_mm
+        return np.array([x0, y0, 0.0])
+
+
+def write_setup(path: str | Path, setup: Setup) -> Path:
+    """Write ``setup`` as JSON (atomically)."""
+    from hifumotion.io import write_json
+
+    return write_json(path, setup.model_dump(mode="json"))
+
+
+def read_setup(path: str | Path) -> Setup:
+    """``setup.json`` as a :class:`Setup`; a missing, malformed or invalid file is one
+    :class:`~hifumotion.errors.InputError` naming the file and the field."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("no such file (an observed folder needs its setup.json)", p)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"not valid JSON ({exc})", p) from None
+    if not isinstance(data, dict):
+        raise InputError("expected a JSON object", p)
+    if isinstance(data.get("bar"), dict) and "force_ramp_s" in data["bar"] and "push" not in data:
+        # written before the schedule had a section of its own: the bar carried the ramp
+        bar = dict(data["bar"])
+        data = {**data, "bar": bar, "push": {"shape": "ramp_hold", "ramp_s": bar.pop("force_ramp_s")}}
+    data.setdefault("schema_version", SCHEMA_VERSION)
+    if data["schema_version"] != SCHEMA_VERSION:
+        raise InputError(f"schema_version {data['schema_version']!r}; this hifumotion reads version {SCHEMA_VERSION}", p)
+    return validate_config(Setup, data, p)
+
+
+__all__ = ["SCHEMA_VERSION", "Setup", "ImagingGeometry", "TankSetup", "BarSetup", "PushSchedule",
+           "read_setup", "write_setup"]
