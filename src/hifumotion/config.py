@@ -49,9 +49,9 @@ class ReadOptions(ConfigModel):
 
 def read_config_file(path: str | Path) -> dict[str, Any]:
     """The raw mapping in a ``.toml``, ``.yaml`` or ``.yml`` file."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such configuration file", p)
+    from hifumotion.io.files import require_regular_file
+
+    p = require_regular_file(path, "configuration file")
     suffix = p.suffix.lower()
     try:
         if suffix == ".toml":
@@ -60,7 +60,7 @@ def read_config_file(path: str | Path) -> dict[str, Any]:
             data = yaml.safe_load(p.read_text(encoding="utf-8")) or {}
         else:
             raise InputError(f"unsupported configuration format '{suffix}'; expected .toml, .yaml or .yml", p)
-    except (tomllib.TOMLDecodeError, yaml.YAMLError) as exc:
+    except (tomllib.TOMLDecodeError, yaml.YAMLError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot parse ({' '.join(str(exc).split())})", p) from None
     if not isinstance(data, dict):
         raise InputError("expected a table of settings at the top level", p)

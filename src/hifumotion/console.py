@@ -30,10 +30,6 @@ def setup(verbosity: int = 0, quiet: bool = False) -> None:
     log.propagate = False
 
 
-def is_quiet() -> bool:
-    return _quiet
-
-
 def track(items: Iterable[T], description: str, total: int | None = None) -> Iterator[T]:
     """Iterate with a progress bar on standard error (none with ``-q`` or when not a terminal)."""
     if _quiet or not console.is_terminal:

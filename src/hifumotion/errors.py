@@ -42,5 +42,9 @@ def brief(exc: BaseException, limit: int = 160) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
+class CalibrationFailed(HifuError, RuntimeError):
+    """Most forward runs of a calibration failed: the fit cannot go on (the message says why)."""
+
+
 class OutputExistsError(HifuError, FileExistsError):
     """The output folder exists and ``overwrite`` was not given."""

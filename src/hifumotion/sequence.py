@@ -117,6 +117,14 @@ class ImageSequence:
         frames = np.asarray(array)
         if frames.ndim == 2:
             frames = frames[None]
+        if frames.ndim != 3 or min(frames.shape) == 0:
+            raise InputError(f"expected one image or a stack of images, got an array of shape {frames.shape}")
+        if not np.issubdtype(frames.dtype, np.number) and frames.dtype != np.bool_:
+            raise InputError(f"expected numeric pixel values, got {frames.dtype}")
+        if np.issubdtype(frames.dtype, np.floating) or np.issubdtype(frames.dtype, np.complexfloating):
+            bad = ~np.isfinite(frames)
+            if bad.any():
+                raise InputError(f"{int(bad.sum())} pixel(s) are NaN or infinite; expected finite intensities")
         return cls(
             frames=scale_intensities(frames, value_range=value_range),
             spacing_mm=as_spacing_mm(spacing_mm),

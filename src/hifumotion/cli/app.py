@@ -50,3 +50,12 @@ def parse_spacing(text: Optional[str]) -> Optional[tuple[float, float]]:
     except ValueError:
         raise InputError(f"expected a number or 'row,col' in mm, got {text!r}", "--spacing") from None
     return as_spacing_mm(values, "--spacing")
+
+
+def positive(value: Optional[float]) -> Optional[float]:
+    """Typer callback: a finite number > 0 (None passes: the option was not given)."""
+    import math
+
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"expected a positive number, got {value:g}")
+    return value

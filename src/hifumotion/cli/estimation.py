@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from hifumotion.cli.app import app
+from hifumotion.cli.app import app, positive
 from hifumotion.console import console
 from hifumotion.errors import InputError
 from hifumotion import paper
@@ -20,13 +20,13 @@ def calibrate(
     method: str = typer.Option("least_squares", "--method", help="least_squares (default), cmaes, or table1 (the paper's iterative algorithm)."),
     training: Optional[str] = typer.Option(None, "--training", help="Training frames: '20,30,40' or '20:101:10' (default: the paper's protocol)."),
     contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of GLCV tracking."),
-    force: float = typer.Option(paper.FORCE_N, "--force", help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
-    particles: int = typer.Option(paper.TISSUE_PARTICLES, "--particles", help="Tissue particles of the fitted model (the paper: 4,399)."),
-    search_particles: int = typer.Option(1000, "--search-particles", help="Tissue particles of the coarser model the search runs on."),
-    max_evaluations: int = typer.Option(8, "--max-evaluations", help="Least squares: residual evaluations (each with a p-run Jacobian)."),
-    workers: Optional[int] = typer.Option(None, "--workers", help="Dask worker processes of the local cluster (default: the cores)."),
+    force: float = typer.Option(paper.FORCE_N, "--force", callback=positive, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
+    particles: int = typer.Option(paper.TISSUE_PARTICLES, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (the paper: 4,399)."),
+    search_particles: int = typer.Option(1000, "--search-particles", min=100, max=1_000_000, help="Tissue particles of the coarser model the search runs on."),
+    max_evaluations: int = typer.Option(8, "--max-evaluations", min=1, help="Least squares: residual evaluations (each with a p-run Jacobian)."),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Dask worker processes of the local cluster (default: the cores)."),
     scheduler_address: Optional[str] = typer.Option(None, "--scheduler-address", help="Use an existing Dask cluster (tcp://host:8786)."),
-    boundary_offset: float = typer.Option(0.0, "--boundary-offset", help="How far outside the true boundary your system's segmentations lie (mm, from a phantom of known size); masks move inwards by it."),
+    boundary_offset: float = typer.Option(0.0, "--boundary-offset", min=-5.0, max=5.0, help="How far outside the true boundary your system's segmentations lie (mm, from a phantom of known size); masks move inwards by it."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A search_log.jsonl of an interrupted calibration: its runs are not repeated."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
@@ -35,6 +35,7 @@ def calibrate(
 
     from hifumotion.console import StageBars
     from hifumotion.estimation.calibrate import CalibrationSettings, calibrate as run_calibration
+    from hifumotion.estimation.evaluator import check_search_log
     from hifumotion.estimation.model import ModelSettings
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import parse_frames
@@ -45,8 +46,8 @@ def calibrate(
 
     if method not in ("least_squares", "cmaes", "table1"):
         raise InputError(f"expected least_squares, cmaes or table1, got {method!r}", "--method")
-    if resume is not None and not resume.is_file():
-        raise InputError("no such search log", resume)
+    if resume is not None:
+        check_search_log(resume)
     observed = load_observed(observed_dir)
     frames = parse_frames(training, len(observed.frames), "--training")
     settings = CalibrationSettings(method=method, training_frames=frames, force_n=force,
@@ -58,7 +59,7 @@ def calibrate(
                                             "particles": particles, "search_particles": search_particles,
                                             "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset,
                                             "workers": workers, "scheduler_address": scheduler_address})
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(observed_dir, contours, resume)) as out:
         log = out / "search_log.jsonl"
         if resume is not None:
             shutil.copyfile(resume, log)
@@ -112,7 +113,7 @@ def predict(
     online_frames = sorted({t + h for t in now for h in [0, *horizons] if t + h <= max(wanted)})
     record = RunRecord("predict", config={"calibration": str(calibration_dir), "frames": wanted,
                                           "parameters": k.as_dict()})
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(calibration_dir,)) as out:
         with StageBars() as progress, record.stage("predict"):
             progress("predict", 0.0)
             t0 = time.perf_counter()

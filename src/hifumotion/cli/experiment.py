@@ -18,7 +18,7 @@ def experiment(
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New output folder (observed/ and truth/ go inside)."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="twin.toml (or .yaml) overriding any setting of the preset."),
     preset: str = typer.Option("default", "--preset", help="default (the paper-sized twin) or small (a reduced twin for tests)."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of every random draw (overrides the config's)."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of every random draw (overrides the config's)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
     print_config: bool = typer.Option(False, "--print-config", help="Print every setting (with its unit) as TOML and exit."),
 ) -> None:
@@ -37,7 +37,7 @@ def experiment(
         raise InputError("give an output folder", "--output")
     record = RunRecord("experiment", config=json.loads(cfg.model_dump_json()), seed=cfg.seed)
     record.extra["preset"] = preset
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(config,)) as out:
         with StageBars() as progress, record.stage("experiment"):
             result = generate_twin(cfg, out, progress)
         record.extra["timings_s"] = result.timings_s

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import typer
@@ -9,14 +10,15 @@ import typer
 from hifumotion.cli.app import app
 from hifumotion.console import console
 from hifumotion.errors import InputError
+from hifumotion.resources import check_memory
 
 
 @app.command()
 def phantom(
     shape: str = typer.Option("ellipse", "--shape", help="ellipse or irregular."),
     preset: str = typer.Option("medium", "--preset", help="easy, medium or hard."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the shape, the scatterers and the noise."),
-    size: int = typer.Option(256, "--size", help="Image size in px (square)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the shape, the scatterers and the noise."),
+    size: int = typer.Option(256, "--size", min=32, help="Image size in px (square, ≥ 32)."),
     spacing: float = typer.Option(0.15, "--spacing", help="Pixel size in mm."),
     output: Path = typer.Option(..., "--output", "-o", help="New output folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
@@ -30,8 +32,10 @@ def phantom(
         raise InputError("expected ellipse or irregular", "--shape")
     if preset not in PRESETS:
         raise InputError(f"expected one of {', '.join(PRESETS)}", "--preset")
-    if size < 32 or spacing <= 0:
-        raise InputError("expected --size >= 32 px and a positive --spacing in mm", "--size/--spacing")
+    if not (math.isfinite(spacing) and 0 < spacing <= 10):
+        raise InputError(f"expected a pixel size in mm, 0 < spacing ≤ 10, got {spacing}", "--spacing")
+    # the simulator holds a few dozen float arrays of the image's size
+    check_memory(60.0 * 8 * size * size, f"a {size} × {size} px phantom", "--size")
     record = RunRecord("phantom", config={"shape": shape, "preset": preset, "size_px": size, "spacing_mm": spacing},
                        seed=seed)
     with output_folder(output, overwrite) as out:

@@ -8,14 +8,14 @@ from typing import Optional
 
 import typer
 
-from hifumotion.cli.app import app, parse_spacing
+from hifumotion.cli.app import app, parse_spacing, positive
 
 
 @app.command()
 def info(
     path: Path = typer.Argument(..., help="Image file or folder: PNG/JPEG/TIFF, DICOM, NIfTI/MHA/NRRD, video."),
     spacing: Optional[str] = typer.Option(None, "--spacing", help="Pixel size in mm: '0.2' or 'row,col'. Overrides the file."),
-    frame_interval: Optional[float] = typer.Option(None, "--frame-interval", help="Seconds between frames. Overrides the file."),
+    frame_interval: Optional[float] = typer.Option(None, "--frame-interval", callback=positive, help="Seconds between frames. Overrides the file."),
     kind: str = typer.Option("auto", "--kind", help="How to read the third axis of a 3D file: auto, cine or sweep."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:

@@ -35,7 +35,7 @@ def simulate(
     if output is None:
         raise InputError("give an output folder", "--output")
     record = RunRecord("simulate", config=json.loads(scene.model_dump_json()))
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(scene_file, scene.tissue.particles_csv)) as out:
         with record.stage("simulate"), progress_fraction("simulate") as update:
             result = run(scene, out, progress=update)
         record.extra["scene"] = result.facts

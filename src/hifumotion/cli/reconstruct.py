@@ -8,7 +8,7 @@ from typing import Optional
 import numpy as np
 import typer
 
-from hifumotion.cli.app import app, parse_spacing
+from hifumotion.cli.app import app, parse_spacing, positive
 from hifumotion.console import console, log
 from hifumotion.errors import InputError
 
@@ -18,13 +18,14 @@ def reconstruct(
     sweep: Path = typer.Argument(..., help="Masks of the sweep's slices: a folder of mask PNGs, a NIfTI/MHA/NRRD volume or DICOM series."),
     slice_spacing: Optional[float] = typer.Option(None, "--slice-spacing", help="Gap between slices in mm (when the file has no positions)."),
     spacing: Optional[str] = typer.Option(None, "--spacing", help="In-plane pixel size in mm: '0.2' or 'row,col'. Overrides the file."),
-    voxel: Optional[float] = typer.Option(None, "--voxel", help="Voxel size of the volume in mm (default from the sweep)."),
-    particle_spacing: Optional[float] = typer.Option(None, "--particle-spacing", help="Also write particles on a lattice of this spacing (mm)."),
+    voxel: Optional[float] = typer.Option(None, "--voxel", callback=positive, help="Voxel size of the volume in mm (default from the sweep)."),
+    particle_spacing: Optional[float] = typer.Option(None, "--particle-spacing", callback=positive, help="Also write particles on a lattice of this spacing (mm)."),
     output: Path = typer.Option(..., "--output", "-o", help="New output folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Reconstruct the tissue: volume (NIfTI), surface (STL, PLY, VTP) and optionally particles (CSV)."""
     from hifumotion.io import output_folder, read_sequence, write_json, write_text
+    from hifumotion.io.writers import check_binary
     from hifumotion.reconstruction import reconstruct as run
     from hifumotion.run_info import RunRecord
 
@@ -37,15 +38,19 @@ def reconstruct(
         positions = seq.slice_positions_mm
     else:
         raise InputError("has no slice positions; give --slice-spacing", sweep)
+    check_binary(seq.frames, sweep)
     if not seq.spacing_known and spacing is None:
         log.warning("%s carries no pixel size; using 1 mm (give --spacing)", sweep)
     masks = seq.frames > 0.5
     record = RunRecord("reconstruct", config={"sweep": str(sweep), "spacing_mm": list(seq.spacing_mm),
                                               "slice_positions_mm": [float(p) for p in positions],
                                               "voxel_mm": voxel, "particle_spacing_mm": particle_spacing})
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(sweep,)) as out:
         with record.stage("reconstruct"):
-            rec = run(masks, seq.spacing_mm, positions, voxel_mm=voxel)
+            try:
+                rec = run(masks, seq.spacing_mm, positions, voxel_mm=voxel)
+            except InputError as exc:   # name the option or the file the user gave
+                raise InputError(exc.reason, "--voxel" if exc.source == "voxel size" else sweep) from None
         with record.stage("write"):
             files = rec.write(out)
             summary = {"volume_mm3": rec.volume_mm3, "surface_area_mm2": float(rec.mesh.area),
@@ -53,7 +58,10 @@ def reconstruct(
                        "vertices": int(len(rec.mesh.vertices)), "faces": int(len(rec.mesh.faces)),
                        "notes": rec.notes, "files": {k: v.name for k, v in files.items()}}
             if particle_spacing:
-                p = rec.particles(particle_spacing)
+                try:
+                    p = rec.particles(particle_spacing)
+                except InputError as exc:
+                    raise InputError(exc.reason, "--particle-spacing") from None
                 rows = "\n".join(f"{x:.5f},{y:.5f},{z:.5f},{v:.6g},{int(s)}"
                                  for (x, y, z), v, s in zip(p.positions_mm, p.volume_mm3, p.surface))
                 write_text(out / "particles.csv", "x_mm,y_mm,z_mm,volume_mm3,surface\n" + rows + "\n")

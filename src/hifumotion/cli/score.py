@@ -7,8 +7,9 @@ from typing import Optional
 
 import typer
 
-from hifumotion.cli.app import app
+from hifumotion.cli.app import app, positive
 from hifumotion.console import console
+from hifumotion.errors import InputError
 
 
 @app.command()
@@ -16,7 +17,7 @@ def score(
     prediction_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png predicted masks (0/255)."),
     truth_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png true masks (an experiment's truth/)."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New folder for score.csv and score.json (default PREDICTION_DIR/score)."),
-    spacing: Optional[float] = typer.Option(None, "--spacing", help="Pixel size in mm (default: the truth's parameters.json)."),
+    spacing: Optional[float] = typer.Option(None, "--spacing", callback=positive, help="Pixel size in mm (default: the truth's parameters.json)."),
     images: Optional[Path] = typer.Option(None, "--images", help="The observed frames (frame_NNNN.png) for the overlays (default: TRUTH_DIR/../observed/frames if present)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
@@ -24,9 +25,11 @@ def score(
     from hifumotion.io import output_folder, write_json
     from hifumotion.io.files import write_text
     from hifumotion.run_info import RunRecord
-    from hifumotion.errors import InputError
     from hifumotion.scoring import overlay_figure, pixel_size_mm, read_frame_masks, score_masks
 
+    for folder in (prediction_dir, truth_dir):
+        if not folder.is_dir():
+            raise InputError("no such folder (expected frames/frame_NNNN.png masks)", folder)
     pixel = spacing if spacing is not None else pixel_size_mm(truth_dir)
     record = RunRecord("score", config={"prediction_dir": str(prediction_dir), "truth_dir": str(truth_dir),
                                         "pixel_mm": pixel})
@@ -37,7 +40,7 @@ def score(
     if images is not None and not images.is_dir():
         raise InputError("no such folder of observed frames", images)
     out_dir = output if output is not None else prediction_dir / "score"
-    with output_folder(out_dir, overwrite) as out:
+    with output_folder(out_dir, overwrite, inputs=(truth_dir, images)) as out:
         write_text(out / "score.csv", table.to_csv())
         write_json(out / "score.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows})
         if frames_dir.is_dir():

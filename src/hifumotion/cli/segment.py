@@ -8,7 +8,7 @@ from typing import Any, Optional
 import numpy as np
 import typer
 
-from hifumotion.cli.app import app, parse_spacing
+from hifumotion.cli.app import app, parse_spacing, positive
 from hifumotion.console import console, log, track
 from hifumotion.errors import InputError
 
@@ -17,9 +17,11 @@ def load_init(path: Path, image_path: Path, name: Optional[str], init_kind: Opti
     """The initial contour for ``image_path`` from a JSON (``init.json`` layout or one entry), a mask PNG or a contour CSV."""
     from hifumotion.contour import parse_init_entry
     from hifumotion.io import read_contours_csv, read_init_json, read_mask
+    from hifumotion.io.files import require_regular_file
     from hifumotion.io.naming import full_suffix
 
     suffix = full_suffix(path)
+    require_regular_file(path, "initial contour")
     if suffix == ".json":
         data = read_init_json(path)
         if "ellipse" in data or "points" in data:
@@ -32,11 +34,12 @@ def load_init(path: Path, image_path: Path, name: Optional[str], init_kind: Opti
                 raise InputError(f"has no entry for '{key}'; pass --name with one of its keys", path)
         return parse_init_entry(data[key], init_kind, where=f"{path}[{key}]")
     if suffix in (".png", ".bmp", ".tif", ".tiff"):
-        mask = read_mask(path)
+        mask = read_mask(path, binary=True)
         if mask.shape != shape:
             raise InputError(f"mask shape {mask.shape} differs from the image's {shape}", path)
         return mask
     if suffix == ".csv":
+        require_regular_file(path, "contour CSV")
         contours = read_contours_csv(path)
         return next(iter(contours.values()))
     raise InputError("expected an initial contour as .json (init.json layout), a mask .png or a contour .csv", path)
@@ -51,7 +54,7 @@ def segment(
     init_kind: Optional[str] = typer.Option(None, "--init-kind", help="ellipse or points, when the JSON has both."),
     name: Optional[str] = typer.Option(None, "--name", help="Key of the image in the init JSON (default: the file name)."),
     spacing: Optional[str] = typer.Option(None, "--spacing", help="Pixel size in mm: '0.2' or 'row,col'. Overrides the file."),
-    frame_interval: Optional[float] = typer.Option(None, "--frame-interval", help="Seconds between frames. Overrides the file."),
+    frame_interval: Optional[float] = typer.Option(None, "--frame-interval", callback=positive, help="Seconds between frames. Overrides the file."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Segment the target in an image, or track it through every frame of a sequence."""
@@ -59,6 +62,7 @@ def segment(
                                write_masks_nifti, write_png_stack)
     from hifumotion.run_info import RunRecord
     from hifumotion.segmentation import METHODS, track as track_frames
+    from hifumotion.segmentation.levelset import check_init
 
     if method.lower() not in METHODS:
         raise InputError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}", "--method")
@@ -66,10 +70,11 @@ def segment(
         raise InputError("expected 'ellipse' or 'points'", "--init-kind")
     seq = read_sequence(source, parse_spacing(spacing), frame_interval)
     start = load_init(init, source, name, init_kind, seq.shape)
+    check_init(start, seq.shape, str(init))
     record = RunRecord("segment", config={"source": str(source), "init": str(init), "method": method,
                                           "init_kind": init_kind, "spacing_mm": list(seq.spacing_mm),
                                           "frame_interval_s": seq.frame_interval_s})
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(source, init)) as out:
         with record.stage("segment"):
             result = track_frames(seq, start, method, progress=True)
         masks = result.masks
@@ -115,7 +120,7 @@ def compare(
     methods: str = typer.Option("gac,cv,lcv,rsf,mslcv,glcv", "--methods", help="Comma-separated methods."),
     init_kind: str = typer.Option("ellipse", "--init-kind", help="ellipse, points or both."),
     output: Path = typer.Option(..., "--output", "-o", help="New output folder."),
-    limit: Optional[int] = typer.Option(None, "--limit", help="Only the first N images."),
+    limit: Optional[int] = typer.Option(None, "--limit", min=1, help="Only the first N images."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Reproduce the paper's Table 2 and Figures 2–3 on a dataset: every method from the same start."""
@@ -137,7 +142,7 @@ def compare(
         data = Dataset(data.root, data.items[:limit])
     record = RunRecord("compare", config={"dataset": str(dataset), "methods": chosen, "init_kind": init_kind,
                                           "images": len(data)})
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(dataset,)) as out:
         for kind in kinds:
             with record.stage(f"compare ({kind})"):
                 cmp = compare_methods(data, chosen, kind, progress=track)

@@ -20,12 +20,12 @@ from hifumotion.errors import InputError
 def demo(
     output: Path = typer.Option(Path("demo-output"), "--output", "-o", help="New output folder."),
     preset: str = typer.Option("demo", "--preset", help="Synthetic experiment: demo (minutes), small (seconds), default (the paper's resolution; long)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the synthetic experiment."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the synthetic experiment."),
     dataset: Optional[Path] = typer.Option(None, "--dataset", help="Real images with expert masks (images/, masks/, init.json); default ../shared/data/ddti."),
-    images: int = typer.Option(6, "--images", help="How many images of the dataset to segment."),
-    particles: Optional[int] = typer.Option(None, "--particles", help="Tissue particles of the fitted model (default: the preset's model size)."),
-    max_evaluations: Optional[int] = typer.Option(None, "--max-evaluations", help="Least-squares evaluations of the calibration (default 3 on the reduced presets, 8 on default)."),
-    workers: Optional[int] = typer.Option(None, "--workers", help="Dask worker processes (default: the cores)."),
+    images: int = typer.Option(6, "--images", min=1, help="How many images of the dataset to segment."),
+    particles: Optional[int] = typer.Option(None, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (default: the preset's model size)."),
+    max_evaluations: Optional[int] = typer.Option(None, "--max-evaluations", min=1, help="Least-squares evaluations of the calibration (default 3 on the reduced presets, 8 on default)."),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Dask worker processes (default: the cores)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Run the whole system on the synthetic experiment: twin → segment → reconstruct → calibrate → predict → report."""
@@ -48,7 +48,7 @@ def demo(
                             estimation_overrides=overrides)
     record = RunRecord("demo", config={"preset": preset, "seed": seed, "dataset": None if dataset is None else str(dataset),
                                        "images": images}, seed=seed)
-    with output_folder(output, overwrite) as out:
+    with output_folder(output, overwrite, inputs=(dataset,)) as out:
         with StageBars() as progress:
             summary = run_demo(out, settings, record, progress)
         record.extra["summary"] = summary
@@ -73,7 +73,7 @@ def run(
     from hifumotion.console import StageBars
     from hifumotion.io import output_folder
     from hifumotion.run_info import RunRecord
-    from hifumotion.workflow.user_run import example_text, load_run_config, run_user
+    from hifumotion.workflow.user_run import example_text, load_run_config, run_inputs, run_user
 
     if example:
         typer.echo(example_text(), nl=False)        # plain stdout, unwrapped: meant for "> run.toml"
@@ -85,7 +85,7 @@ def run(
     if target is None:
         raise InputError("no output folder: give -o or set output in the configuration", config)
     record = RunRecord("run", config=cfg.model_dump(mode="json"))
-    with output_folder(target, overwrite) as out:
+    with output_folder(target, overwrite, inputs=(config, *run_inputs(cfg, base))) as out:
         with StageBars() as progress:
             summary = run_user(cfg, base, out, record, progress)
         record.extra["summary"] = summary

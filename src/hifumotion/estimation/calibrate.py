@@ -80,6 +80,7 @@ class Calibration:
     observation: Observation
     runs: int
     timings_s: dict = field(default_factory=dict)
+    failed_runs: int = 0            # forward runs that failed (logged, not used as data)
 
     def report(self) -> dict:
         """Values with uncertainties and what is identifiable, as written to ``parameters.json``."""
@@ -195,7 +196,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     std = {n: float(v) for n, v in zip(NAMES, unc.std)}   # inf: not seen by the data
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), fit_result, table1,
                        mapped, degeneracy, unc.correlation.round(3).tolist(), final, search, observation,
-                       ev.runs, timings)
+                       ev.runs, timings, ev.failed)
 
 
 def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:

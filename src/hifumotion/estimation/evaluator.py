@@ -7,11 +7,18 @@ of single-threaded worker processes by default, or an existing cluster at
 calibration started again with the same log reads it back and skips the runs
 already done — the estimators are deterministic, so a resumed search retraces
 its steps from the log and goes on where it stopped.
+
+A run that fails (the simulation diverged, a worker died) is a failure, not a
+data point: it is logged with ``"status": "failed"`` and its error, never cached
+nor replayed by a resume; the estimators see a large residual for it, so they
+step away, and when most runs of a batch fail the calibration stops with one
+clear error (:class:`~hifumotion.errors.CalibrationFailed`).
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,7 +26,8 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from hifumotion.errors import InputError
+from hifumotion.console import log
+from hifumotion.errors import CalibrationFailed, InputError, brief
 from hifumotion.estimation.model import ModelSpec, Parameters, run_model
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
 from hifumotion.estimation.space import SearchSpace
@@ -39,6 +47,32 @@ def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: 
     run = run_model(spec, k, int(data.frames[n - 1]))
     r = residuals_mm(run.points_mm, data, n)
     return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps}
+
+
+#: Residual (mm) given to a failed run at each point, so an estimator steps away from it.
+FAILED_RESIDUAL_MM = 10.0
+
+
+def check_search_log(path: str | Path) -> Path:
+    """Raise :class:`~hifumotion.errors.InputError` unless ``path`` is a readable search log
+    (JSON lines of runs; a last line cut short by an interruption is allowed)."""
+    from hifumotion.io.files import require_regular_file
+
+    p = require_regular_file(path, "search log (search_log.jsonl)")
+    try:
+        lines = [ln for ln in p.read_text(encoding="utf-8").splitlines() if ln.strip()]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the search log ({brief(exc)})", p) from None
+    for number, line in enumerate(lines, 1):
+        try:
+            rec = json.loads(line)
+            ok = isinstance(rec, dict) and {"theta", "upto"} <= set(rec)
+        except ValueError:
+            ok = number == len(lines) and number > 1    # only the last line may be cut short while written
+        if not ok:
+            raise InputError(f"line {number} is not a run of a search log (expected JSON with theta, upto, "
+                             "residuals_mm)", p)
+    return p
 
 
 def _key(theta: np.ndarray, upto: int) -> tuple:
@@ -71,6 +105,7 @@ class Evaluator:
         self.cache: dict[tuple, np.ndarray] = {}
         self.history: list[dict] = []
         self.runs = 0
+        self.failed = 0
         self.run_seconds = 0.0
         self.resumed = 0
         self._client = None
@@ -89,6 +124,8 @@ class Evaluator:
                 upto = int(rec["upto"])
             except (ValueError, KeyError, TypeError):
                 continue  # a line cut short by an interruption
+            if rec.get("status", "ok") != "ok":
+                continue  # a failure is not a result: run it again
             self.cache[_key(theta, upto)] = r
             self.history.append(rec)
             self.resumed += 1
@@ -99,7 +136,10 @@ class Evaluator:
                "S_t_mm": frame_sums_mm(result["residuals_mm"]).round(5).tolist(),
                "cost_mm": float(np.abs(result["residuals_mm"]).sum()),
                "seconds": round(float(result["seconds"]), 3), "steps": int(result["steps"]),
-               "residuals_mm": np.round(result["residuals_mm"], 5).tolist()}
+               "residuals_mm": np.round(result["residuals_mm"], 5).tolist(),
+               "status": "failed" if "error" in result else "ok"}
+        if "error" in result:
+            rec["error"] = result["error"]
         self.history.append(rec)
         if self.log_path is not None:
             with open(self.log_path, "a", encoding="utf-8") as fh:
@@ -118,7 +158,8 @@ class Evaluator:
                 raise InputError(f"cannot reach the Dask scheduler ({exc})", self.scheduler_address) from None
         else:
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                         dashboard_address=None, silence_logs=40)
+                                         dashboard_address=None,
+                                         silence_logs=logging.WARNING if log.isEnabledFor(logging.DEBUG) else logging.CRITICAL)
             self._client = Client(self._cluster)
         try:
             self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
@@ -139,6 +180,7 @@ class Evaluator:
             yield other
         finally:
             self.runs += other.runs
+            self.failed += other.failed
             self.run_seconds += other.run_seconds
             other._client = other._remote = None
 
@@ -155,9 +197,14 @@ class Evaluator:
         if missing:
             keys = list(missing)
             results = self._submit([self.space.parameters(missing[k]) for k in keys], n)
+            failed = {}
             for key, result in zip(keys, results):
-                self.cache[key] = result["residuals_mm"]
                 self._log(missing[key], n, result)
+                if "error" in result:
+                    failed[key] = result["residuals_mm"]
+                else:
+                    self.cache[key] = result["residuals_mm"]
+            return [failed[_key(t, n)] if _key(t, n) in failed else self.cache[_key(t, n)] for t in thetas]
         return [self.cache[_key(t, n)] for t in thetas]
 
     def _submit(self, ks: list[Parameters], n: int) -> list[dict]:
@@ -176,13 +223,20 @@ class Evaluator:
             except InputError:
                 raise
             except Exception as exc:  # a run that blew up is a bad parameter set, not the end of the fit
-                result = {"residuals_mm": np.full((n, len(self.spec.points_mm)), 10.0), "seconds": 0.0,
-                          "steps": 0, "error": repr(exc)}
+                result = {"residuals_mm": np.full((n, len(self.spec.points_mm)), FAILED_RESIDUAL_MM), "seconds": 0.0,
+                          "steps": 0, "error": brief(exc)}
+                self.failed += 1
+                log.debug("forward run with %s failed: %s", ks[futures[fut]], brief(exc))
             result["residuals_mm"] = np.asarray(result["residuals_mm"], float)
             results[futures[fut]] = result
             self.runs += 1
             self.run_seconds += float(result["seconds"])
             self.progress(done, len(ks))
+        failures = sum("error" in r for r in results)
+        if len(ks) >= 2 and failures > len(ks) / 2:
+            first = next(r["error"] for r in results if "error" in r)
+            raise CalibrationFailed(f"{failures} of {len(ks)} forward runs failed (first: {first}); the model "
+                                    "cannot run near these parameters — check the observation and the settings")
         return results
 
     def parameter_runs(self, ks: list[Parameters], upto: int | None = None) -> list[np.ndarray]:
@@ -194,4 +248,4 @@ class Evaluator:
         return self.residuals([theta], upto)[0]
 
 
-__all__ = ["Evaluator", "forward_residuals"]
+__all__ = ["Evaluator", "forward_residuals", "check_search_log", "FAILED_RESIDUAL_MM"]

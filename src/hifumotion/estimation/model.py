@@ -31,8 +31,9 @@ import numpy as np
 
 from hifumotion.errors import InputError
 from hifumotion.particles.quasi_static import settling
-from hifumotion.particles.scene import (BarConfig, ParticleConfig, PhysicsConfig, RunConfig, Scene, TankConfig,
-                                        TissueConfig, spacing_for_count, touching_tip)
+from hifumotion.particles.scene import (BYTES_PER_PARTICLE, BarConfig, ParticleConfig, PhysicsConfig, RunConfig,
+                                        Scene, TankConfig, TissueConfig, spacing_for_count, touching_tip)
+from hifumotion.resources import check_memory
 from hifumotion import paper
 
 
@@ -104,6 +105,9 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     from hifumotion.contour import Contour, resample_closed
 
     s = settings or ModelSettings()
+    # the tissue and its water (about as many again) before any array is made
+    check_memory(2.5 * s.tissue_particles * BYTES_PER_PARTICLE, f"a model of {s.tissue_particles} tissue particles",
+                 "particles")
     setup = observation.observed.setup
     rec = observation.reconstruction
     def fill(dx):

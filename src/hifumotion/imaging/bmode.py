@@ -38,7 +38,6 @@ from numba import njit
 from hifumotion.errors import InputError
 
 SPEED_OF_SOUND_MM_PER_US = 1.54
-NEPER_PER_DB = np.log(10.0) / 20.0
 #: Gaussian σ from FWHM.
 FWHM_TO_SIGMA = 1.0 / (2.0 * np.sqrt(2.0 * np.log(2.0)))
 

@@ -12,9 +12,9 @@ from hifumotion.errors import InputError
 
 def read_init_json(path: str | Path) -> dict[str, dict[str, Any]]:
     """The raw mapping ``image name → {"ellipse": {...}, "points": [...]}`` of an ``init.json``."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such file", p)
+    from hifumotion.io.files import require_regular_file
+
+    p = require_regular_file(path, "init.json")
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

@@ -44,11 +44,80 @@ def _third_axis_is_time(image: sitk.Image) -> bool:
     return kind is not None and kind.strip().lower() == "time"
 
 
+def _nifti_dims_bytes(path: Path) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """``dim``, ``pixdim`` and the byte count a NIfTI-1 file's header promises (single file
+    ``.nii``/``.nii.gz``), or None when it is not one."""
+    import gzip
+
+    opener = gzip.open if path.name.lower().endswith(".gz") else open
+    try:
+        with opener(path, "rb") as fh:
+            header = fh.read(348)
+    except (OSError, EOFError):
+        return None
+    if len(header) < 348:
+        return None
+    for order in ("<", ">"):
+        if int(np.frombuffer(header[:4], f"{order}i4")[0]) == 348:
+            break
+    else:
+        return None
+    if header[344:347] not in (b"n+1", b"ni1"):
+        return None
+    dim = np.frombuffer(header[40:56], f"{order}i2").astype(int)
+    pixdim = np.frombuffer(header[76:108], f"{order}f4").astype(float)
+    bitpix = int(np.frombuffer(header[72:74], f"{order}i2")[0])
+    offset = int(np.frombuffer(header[108:112], f"{order}f4")[0])
+    n = int(np.prod(np.maximum(dim[1:1 + max(min(dim[0], 7), 0)], 1)))
+    return dim, pixdim, (max(offset, 352) + n * bitpix // 8) if header[344:347] == b"n+1" else -1
+
+
+def _file_bytes(path: Path, limit: int) -> int:
+    """Bytes in ``path`` after decompression (counted up to ``limit``)."""
+    import gzip
+
+    if not path.name.lower().endswith(".gz"):
+        return path.stat().st_size
+    total = 0
+    try:
+        with gzip.open(path, "rb") as fh:
+            while total < limit:
+                chunk = fh.read(1 << 22)
+                if not chunk:
+                    break
+                total += len(chunk)
+    except (OSError, EOFError):
+        pass
+    return total
+
+
+def check_nifti(path: Path) -> None:
+    """Refuse a NIfTI file whose header and data disagree: a non-positive voxel size (ITK
+    would take its absolute value from the orientation matrix, silently) or fewer bytes than
+    the header promises (a truncated file, which would read as zeros)."""
+    facts = _nifti_dims_bytes(path)
+    if facts is None:
+        return
+    dim, pixdim, expected = facts
+    ndim = int(dim[0])
+    if not 1 <= ndim <= 7:
+        raise InputError(f"NIfTI header: dim[0] = {ndim}; expected 1 … 7 dimensions", path)
+    sizes = pixdim[1:1 + ndim]
+    if np.any(~np.isfinite(sizes)) or np.any(sizes[: min(ndim, 3)] <= 0):
+        raise InputError(f"NIfTI header: voxel sizes (pixdim) {sizes.round(6).tolist()}; expected positive numbers", path)
+    if expected > 0:
+        found = _file_bytes(path, expected)
+        if found < expected:
+            raise InputError(f"truncated: the header promises {expected} bytes, the file holds {found}", path)
+
+
 def read_itk_file(path: Path, kind: str = "auto") -> dict[str, Any]:
     """Read a NIfTI/MHA/MHD/NRRD file into the fields of an :class:`ImageSequence`.
 
     ``kind`` is ``"auto"``, ``"cine"`` or ``"sweep"`` and only matters for 3D files.
     """
+    if path.name.lower().endswith((".nii", ".nii.gz")):
+        check_nifti(path)
     try:
         image = sitk.ReadImage(str(path))
     except Exception as exc:

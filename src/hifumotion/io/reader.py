@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from hifumotion.errors import InputError
+from hifumotion.io.files import require_regular_file
 from hifumotion.io.naming import ITK_SUFFIXES, RASTER_SUFFIXES, VIDEO_SUFFIXES, full_suffix, looks_like_dicom
 from hifumotion.sequence import ImageSequence, as_spacing_mm
 
@@ -82,6 +83,8 @@ def read_sequence(
     p = Path(path)
     if not p.exists():
         raise InputError("no such file or folder", p)
+    if not p.is_dir():
+        require_regular_file(p, "image file")
     if kind not in ("auto", "cine", "sweep"):
         raise InputError(f"kind must be 'auto', 'cine' or 'sweep', got {kind!r}", "kind")
     user_spacing = None if spacing_mm is None else as_spacing_mm(spacing_mm, "spacing_mm")

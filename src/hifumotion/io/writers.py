@@ -34,16 +34,29 @@ def write_mask_png(path: str | Path, mask: np.ndarray) -> Path:
     return Path(path)
 
 
-def read_mask(path: str | Path) -> np.ndarray:
-    """A mask from a PNG (non-zero = target) as a 2D bool array; raises if it has no foreground."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such file", p)
+def read_mask(path: str | Path, binary: bool = True) -> np.ndarray:
+    """A mask from a PNG (non-zero = target) as a 2D bool array; raises if it has no foreground.
+
+    With ``binary`` (the default) the image must hold at most two grey levels, 0 and one
+    other: a B-mode image given where a mask belongs is refused, not thresholded."""
+    from hifumotion.io.files import require_regular_file
+
+    p = require_regular_file(path, "mask image")
     try:
         image = iio.imread(p)
     except Exception as exc:
         raise InputError(f"cannot read as an image ({brief(exc)})", p) from None
+    if binary:
+        check_binary(image, p)
     return as_mask(image, str(p))
+
+
+def check_binary(image: np.ndarray, where: str | Path) -> None:
+    """Raise unless ``image`` holds at most two values, one of them 0 (a mask, not a picture)."""
+    values = np.unique(np.asarray(image))
+    if values.size > 2 or (values.size == 2 and values[0] != 0):
+        raise InputError(f"expected a mask (0 and one other value), got an image with {values.size} grey levels "
+                         f"({values.min():g} … {values.max():g})", where)
 
 
 def _volume_image(volume: np.ndarray, spacing_mm, frame_interval_s, slice_positions_mm) -> sitk.Image:
@@ -142,11 +155,14 @@ def read_contours_csv(path: str | Path, spacing_mm=None) -> dict[str, Contour]:
     Pixel columns are used when present; mm columns need ``spacing_mm`` to
     place them on an image grid (without it, 1 px = 1 mm). Points keep file order.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such file", p)
-    with open(p, newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
+    from hifumotion.io.files import require_regular_file
+
+    p = require_regular_file(path, "contour CSV")
+    try:
+        with open(p, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read as a contour CSV ({brief(exc)})", p) from None
     if not rows:
         raise InputError("no contour rows", p)
     cols = set(rows[0])

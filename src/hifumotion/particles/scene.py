@@ -34,6 +34,7 @@ from pydantic import Field, field_validator, model_validator
 
 from hifumotion.config import ConfigModel
 from hifumotion.errors import InputError
+from hifumotion.resources import check_memory
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.rigid import piecewise_linear_schedule
 from hifumotion.particles.solver import SolverSettings
@@ -42,12 +43,6 @@ from hifumotion.particles.system import (CouplingParameters, FluidParameters, Pa
 from hifumotion import paper
 
 MM = 1e-3
-
-
-def _vector(v, name):
-    if len(v) != 3:
-        raise ValueError(f"{name} needs 3 values (x, y, z)")
-    return v
 
 
 class TankConfig(ConfigModel):
@@ -106,7 +101,7 @@ class BarConfig(ConfigModel):
     tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: touching the tissue (one spacing from the first tissue particle under its end face), on the axis through the tissue's centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
     weight_supported: bool = Field(True, description="the hand holding the bar carries its weight, so the push on the tissue is force_n alone")
-    force_n: float = Field(paper.FORCE_N, description="pushing force held after the ramp, in N (Table 3: 0.25)")
+    force_n: float = Field(paper.FORCE_N, ge=0, description="pushing force held after the ramp, in N (Table 3: 0.25); the bar pushes, it does not pull")
     ramp_s: float = Field(0.2, ge=0, description="time over which the force rises linearly from 0, in s")
     schedule_times_s: list[float] | None = Field(None, description="explicit force schedule: times in s (overrides force_n/ramp_s)")
     schedule_force_n: list[float] | None = Field(None, description="explicit force schedule: forces in N")
@@ -117,6 +112,8 @@ class BarConfig(ConfigModel):
             raise ValueError("give both schedule_times_s and schedule_force_n, or neither")
         if self.schedule_times_s is not None:
             piecewise_linear_schedule(self.schedule_times_s, self.schedule_force_n)
+            if any(not (f >= 0) for f in self.schedule_force_n):
+                raise ValueError("schedule_force_n: the bar pushes, it does not pull; forces must be ≥ 0 N")
         if np.linalg.norm(self.direction) == 0:
             raise ValueError("direction must not be zero")
         return self
@@ -167,6 +164,32 @@ class Scene(ConfigModel):
     particles: ParticleConfig = ParticleConfig()
     physics: PhysicsConfig = PhysicsConfig()
     run: RunConfig = RunConfig()
+
+    @model_validator(mode="after")
+    def _bar_in_tank(self):
+        if self.bar.enabled and self.bar.tip_mm is not None:
+            tip, size = np.asarray(self.bar.tip_mm, float), np.asarray(self.tank.size_mm, float)
+            if np.any(tip < 0) or np.any(tip > size):
+                raise ValueError(f"bar.tip_mm {tuple(self.bar.tip_mm)} lies outside the tank (0 … {tuple(self.tank.size_mm)} mm)")
+        return self
+
+
+#: Memory per particle of a run (bytes): state, neighbour lists of ~ 30–60 entries, kernel
+#: values and gradients, the elastic rest neighbourhoods; measured ≈ 2 kB on the paper-sized
+#: scene, doubled for the peaks of the neighbour search.
+BYTES_PER_PARTICLE = 4096
+
+
+def estimated_particles(scene: Scene) -> float:
+    """How many particles ``scene`` builds, before building them: water and walls fill the
+    tank up to the water line and a few layers around it, the tissue its box."""
+    dx = scene.particles.spacing_mm
+    x, y, z = scene.tank.size_mm
+    wet = max(scene.tank.water_depth_mm, 0.0) + 3 * dx
+    layers = 3 * dx * scene.particles.support_factor
+    walls = layers * (x * z + 2 * (x + z) * wet)
+    tissue = float(np.prod(scene.tissue.size_mm)) if scene.tissue.shape != "particles" else 0.0
+    return (x * z * wet + walls + tissue) / dx ** 3
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -300,6 +323,9 @@ def build_scene(scene: Scene, tissue_particles: tuple[np.ndarray, np.ndarray] | 
     """
     dx_mm = scene.particles.spacing_mm
     tank = scene.tank
+    n = estimated_particles(scene) + (0 if tissue_particles is None else len(tissue_particles[0]))
+    check_memory(n * BYTES_PER_PARTICLE, f"about {n:.3g} particles at a spacing of {dx_mm:g} mm",
+                 "particles.spacing_mm")
     if tissue_particles is None:
         tissue_mm, vol_mm3 = tissue_particles_mm(scene.tissue, tank, dx_mm)
     else:

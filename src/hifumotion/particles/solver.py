@@ -42,6 +42,23 @@ from hifumotion.particles.neighbours import CellGrid
 from hifumotion.particles.system import ParticleSystem
 
 
+def likely_cause(why: int, phase: str) -> str:
+    """What most often makes a run fail this way (``why``: 1 not a number, 2 left the domain,
+    3 too fast), for the particle kind that failed first."""
+    if why == 2 and phase == "rigid":
+        return ("likely cause: the bar was pushed through the tissue or out of the tank — a force too large for "
+                "the tissue's stiffness, a bar that does not meet the tissue, or its tip outside the tank")
+    if why == 2 and phase == "tissue":
+        return ("likely cause: the tissue was squeezed out of the tank — a force too large for its stiffness or "
+                "a tank too small for it")
+    if why == 2:
+        return "likely cause: water thrown out of the tank by a violent start — a smaller cfl, or a slower ramp"
+    if phase == "tissue":
+        return ("likely cause: a time step too long for the tissue's stiffness or contact — a smaller cfl or "
+                "max_step_s, or a softer contact_coefficient")
+    return "likely cause: a time step too long for the contacts — a smaller cfl or max_step_s, or softer coupling"
+
+
 class SimulationDiverged(HifuError):
     """The simulation became unstable; the message names step, particles and limit."""
 
@@ -361,10 +378,10 @@ class Solver:
             reason = (f"moves faster than {self.speed_limit:.3g} m/s (twice the fastest sound speed: "
                       "energy blow-up)")
         shown = ", ".join(str(b) for b in bad[:8]) + (" …" if len(bad) > 8 else "")
+        worst = PHASE_NAMES[int(s.phase[bad[0]])] if len(bad) else kind
         raise SimulationDiverged(
             f"step {s.step} (t = {s.time_s:.6g} s): {len(bad)} particle(s) [{shown}], worst a "
-            f"{PHASE_NAMES[int(s.phase[bad[0]])] if len(bad) else kind} particle, {reason}; "
-            "try a smaller cfl, a larger support or softer coupling")
+            f"{worst} particle, {reason}; {likely_cause(why, worst)}")
 
     def _exclude_spray(self) -> None:
         """Park the water particles that left the domain (as DualSPHysics excludes them).

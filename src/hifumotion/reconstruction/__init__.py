@@ -35,6 +35,7 @@ import numpy as np
 from scipy import ndimage
 
 from hifumotion.errors import InputError
+from hifumotion.resources import check_memory
 from hifumotion.sequence import as_spacing_mm
 
 
@@ -113,6 +114,9 @@ class Reconstruction:
             raise InputError(f"particle spacing must be positive, got {dx_mm!r}", "dx_mm")
         lo = np.min(self.mesh.vertices, axis=0)
         hi = np.max(self.mesh.vertices, axis=0)
+        counts = np.ceil((hi - lo + 2 * dx_mm) / dx_mm)
+        # the lattice, its inside test (a few float64 copies) and the neighbour count
+        check_memory(float(np.prod(counts)) * 120.0, f"particles at a spacing of {dx_mm:g} mm", "particle spacing")
         axes = [np.arange(a + dx_mm / 2, b, dx_mm) for a, b in zip(lo - dx_mm, hi + dx_mm)]
         if any(len(a) == 0 for a in axes):
             raise InputError(f"particle spacing {dx_mm} mm exceeds the tissue's size", "dx_mm")
@@ -293,6 +297,9 @@ def reconstruct(masks: Any, spacing_mm: Any, slice_positions_mm: Any, voxel_mm: 
     rows, cols = np.nonzero(any_inside)
     x0, x1 = (cols.min() - 2) * col_mm - 2 * vox, (cols.max() + 2) * col_mm + 2 * vox
     y0, y1 = (rows.min() - 2) * row_mm - 2 * vox, (rows.max() + 2) * row_mm + 2 * vox
+    # the distance volume, its interpolation planes and marching cubes' copies: ~ 10 float64 per voxel
+    voxels = ((x1 - x0) / vox + 1) * ((y1 - y0) / vox + 1) * ((z[-1] - z[0]) / vox + 1)
+    check_memory(voxels * 80.0, f"a volume of {vox:g} mm voxels", "voxel size")
     xs = np.arange(x0, x1 + vox / 2, vox)
     ys = np.arange(y0, y1 + vox / 2, vox)
     zs = np.arange(z[0], z[-1] + vox / 2, vox)

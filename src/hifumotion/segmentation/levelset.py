@@ -88,6 +88,44 @@ def redistance(phi: np.ndarray, width: float = BAND, box: tuple[int, int, int, i
     return phi
 
 
+def check_init(init: Any, shape: tuple[int, int], where: str = "init") -> None:
+    """Raise :class:`InputError` (naming ``where``) unless the initial contour can start a level
+    set on an image of ``shape``: finite, not absurdly larger than the image, overlapping it.
+
+    Checked before φ is built: an ellipse of a 10⁹ px radius would be sampled at 10¹⁰ points."""
+    from hifumotion.contour import parse_init_entry
+
+    if isinstance(init, dict):
+        init = parse_init_entry(init, where=where)
+    h, w = int(shape[0]), int(shape[1])
+    if isinstance(init, Ellipse):
+        values = np.array([init.cx, init.cy, init.a, init.b, init.angle_deg], float)
+        if not np.all(np.isfinite(values)) or init.a <= 0 or init.b <= 0:
+            raise InputError("the ellipse needs finite values and positive semi-axes a, b (px)", where)
+        if max(init.a, init.b) > 2 * np.hypot(h, w):
+            raise InputError(f"an ellipse with semi-axes {init.a:g} × {init.b:g} px on a {h} × {w} px image; "
+                             "expected one inside the image", where)
+        lo = np.array([init.cx, init.cy]) - max(init.a, init.b)
+        hi = np.array([init.cx, init.cy]) + max(init.a, init.b)
+    elif isinstance(init, (ClickedPoints, Contour)) or (np.ndim(init) == 2 and np.shape(init)[1:] == (2,)
+                                                      and np.shape(init) != tuple(shape)):
+        pts = init.array if isinstance(init, ClickedPoints) else (
+            init.points_px if isinstance(init, Contour) else np.asarray(init, float))
+        if not np.all(np.isfinite(pts)):
+            raise InputError("the initial contour's points must be finite numbers (px)", where)
+        lo, hi = pts.min(0), pts.max(0)
+        if np.any(hi - lo > 4 * np.hypot(h, w)):
+            raise InputError(f"the initial contour spans {hi - lo} px on a {h} × {w} px image", where)
+    else:
+        arr = np.asarray(init)
+        if arr.shape != tuple(shape):
+            raise InputError(f"an initial mask of shape {arr.shape} for an image of shape {tuple(shape)}", where)
+        return
+    if hi[0] < 0 or hi[1] < 0 or lo[0] > w - 1 or lo[1] > h - 1:
+        raise InputError(f"the initial contour (x {lo[0]:.0f}…{hi[0]:.0f}, y {lo[1]:.0f}…{hi[1]:.0f} px) lies outside "
+                         f"the {h} × {w} px image", where)
+
+
 def initial_phi(init: Any, shape: tuple[int, int]) -> np.ndarray:
     """φ for any initial contour: an :class:`Ellipse`, :class:`ClickedPoints` (closed smooth
     curve through them), a :class:`Contour`, an ``(N, 2)`` point array ``(x, y)``, or a mask."""
@@ -95,6 +133,7 @@ def initial_phi(init: Any, shape: tuple[int, int]) -> np.ndarray:
 
     if isinstance(init, dict):
         init = parse_init_entry(init)
+    check_init(init, shape)
     if isinstance(init, Ellipse):
         return phi_from_contour(init.points(max(64, int(2 * np.pi * max(init.a, init.b)))), shape)
     if isinstance(init, ClickedPoints):

@@ -46,8 +46,8 @@ class EstimationConfig(ConfigModel):
     validation_frames: str | None = Field(
         None, description="validation frames, same forms (default: the paper's protocol scaled to the series)")
     force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
-    particles: int = Field(paper.TISSUE_PARTICLES, ge=100, description="tissue particles of the fitted model (the paper: 4,399)")
-    search_particles: int = Field(1000, ge=100, description="tissue particles of the coarser model the search runs on")
+    particles: int = Field(paper.TISSUE_PARTICLES, ge=100, le=1_000_000, description="tissue particles of the fitted model (the paper: 4,399)")
+    search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")

@@ -111,6 +111,12 @@ def load_run_config(path: str | Path) -> tuple[RunConfig, Path]:
     return load_config(p, RunConfig), p.resolve().parent
 
 
+def run_inputs(cfg: RunConfig, base: Path) -> list[Path]:
+    """Every file and folder a run configuration reads (resolved against ``base``)."""
+    paths = [cfg.sweep.path, cfg.frames.path, cfg.initial_contour.path, cfg.training_contours, cfg.truth.masks]
+    return [_resolve(base, p) for p in paths if p is not None]
+
+
 def _resolve(base: Path, p: Path | None) -> Path | None:
     return None if p is None else (p if p.is_absolute() else base / p)
 
@@ -217,4 +223,4 @@ def run_user(cfg: RunConfig, base: Path, out: Path, record, progress: Progress |
     return summary
 
 
-__all__ = ["RunConfig", "example_config", "example_text", "load_run_config", "assemble_observed", "run_user"]
+__all__ = ["run_inputs", "RunConfig", "example_config", "example_text", "load_run_config", "assemble_observed", "run_user"]

@@ -1,0 +1,335 @@
+"""A user's mistakes, as a new user makes them: every one ends with one line naming the
+file or field, exit status 2, no traceback, and nothing that was there before changed.
+
+The cases run in-process through :func:`hifumotion.cli.main` (the console script), in a
+scratch folder that holds valid inputs (a phantom, masks, a scene) beside hostile ones
+(a FIFO, a device, empty, truncated, NaN-filled and grey-valued files). Each case is a
+class of mistake, not one listed input: a bad value of an option of any command, an
+unreadable file of any format, an output folder that would destroy something.
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hifumotion.cli import main
+
+CLI = [sys.executable, "-m", "hifumotion"]
+
+
+# ---------------------------------------------------------------- the scratch folder
+def _write_png(path: Path, array: np.ndarray) -> None:
+    import imageio.v3 as iio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    iio.imwrite(path, array)
+
+
+def _nifti(path: Path, array: np.ndarray, spacing=(0.2, 0.2)) -> None:
+    import SimpleITK as sitk
+
+    image = sitk.GetImageFromArray(array)
+    image.SetSpacing(tuple(spacing)[::-1] + (() if array.ndim == 2 else (1.0,)))
+    sitk.WriteImage(image, str(path))
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory) -> Path:
+    """Valid and hostile inputs; the tests run with this as the working folder."""
+    return build_scratch(tmp_path_factory.mktemp("hostile"))
+
+
+def build_scratch(root: Path) -> Path:
+    old = os.getcwd()
+    os.chdir(root)
+    try:
+        assert _main(["phantom", "--seed", "1", "--size", "96", "-o", "ph"])[0] == 0
+    finally:
+        os.chdir(old)
+    rng = np.random.default_rng(0)
+    image = (rng.random((64, 64)) * 255).astype(np.uint8)
+    _write_png(root / "image.png", image)
+    yy, xx = np.mgrid[:64, :64]
+    disc = ((yy - 32) ** 2 + (xx - 30) ** 2 < 15 ** 2)
+    for k in range(4):                                     # a sweep of binary masks
+        _write_png(root / "masks" / f"slice_{k:03d}.png", (disc * 255).astype(np.uint8))
+        _write_png(root / "grey_masks" / f"slice_{k:03d}.png", (disc * 128 + 40).astype(np.uint8))
+    _write_png(root / "grey_mask.png", (disc * 128 + 40).astype(np.uint8))
+    _write_png(root / "small_mask.png", np.zeros((10, 10), np.uint8))
+    (root / "empty.png").write_bytes(b"")
+    (root / "garbage.png").write_bytes(rng.bytes(300))
+    (root / "afile.txt").write_text("not a folder\n")
+    (root / "notes").mkdir()
+    (root / "notes" / "keep.txt").write_text("a user's own file\n")
+    (root / "empty_folder").mkdir()
+    nan = rng.random((3, 32, 32)).astype(np.float32)
+    nan[1, 5:9, 5:9] = np.nan
+    _nifti(root / "nan.mha", nan)       # MetaImage keeps NaN (ITK's NIfTI writer does not)
+    inf = rng.random((32, 32)).astype(np.float32)
+    inf[0, 0] = np.inf
+    _nifti(root / "inf.mha", inf)
+    _nifti(root / "good.nii.gz", (rng.random((4, 40, 40)) * 255).astype(np.uint8))
+    data = gzip.decompress((root / "good.nii.gz").read_bytes())
+    (root / "truncated.nii.gz").write_bytes(gzip.compress(data[: len(data) // 2]))
+    raw = bytearray(gzip.decompress((root / "good.nii.gz").read_bytes()))
+    pixdim = np.frombuffer(bytes(raw[76:108]), "<f4").copy()
+    pixdim[1] = -0.2                                       # a negative pixel size
+    raw[76:108] = pixdim.astype("<f4").tobytes()
+    (root / "negative_pixdim.nii").write_bytes(bytes(raw))
+    os.mkfifo(root / "fifo.png")
+    init = json.loads((root / "ph" / "init.json").read_text())
+    key = next(iter(init))
+    (root / "huge_init.json").write_text(json.dumps({"ellipse": {"cx": 40, "cy": 40, "a": 1e9, "b": 1e9, "angle_deg": 0}}))
+    (root / "negative_init.json").write_text(json.dumps({"ellipse": {"cx": 40, "cy": 40, "a": -3, "b": 5, "angle_deg": 0}}))
+    (root / "outside_init.json").write_text(json.dumps({"ellipse": {"cx": 4000, "cy": -900, "a": 5, "b": 5, "angle_deg": 0}}))
+    (root / "bad.json").write_text("{ not json")
+    (root / "ph_init_key.txt").write_text(key)
+    (root / "scene_fine.toml").write_text("[particles]\nspacing_mm = 0.01\n")
+    (root / "scene_tip.toml").write_text("[bar]\ntip_mm = [500.0, 19.0, 20.0]\n")
+    (root / "scene_force.toml").write_text("[bar]\nforce_n = -1.0\n")
+    (root / "scene_key.toml").write_text("[bar]\nforse_n = 1.0\n")
+    (root / "scene_broken.toml").write_text("[bar\nforce_n = 1.0\n")
+    (root / "scene_schedule.toml").write_text("[bar]\nschedule_times_s = [0.0, 1.0]\nschedule_force_n = [0.0, -2.0]\n")
+    (root / "resume.jsonl").write_text("this is not a search log\n")
+    (root / "run_tip.toml").write_text(_run_config(tip="[500.0, 19.0, 18.7]"))
+    (root / "run_key.toml").write_text(_run_config(extra="\n[estimation]\nparticels = 300\n"))
+    (root / "run_particles.toml").write_text(_run_config(extra="\n[estimation]\nparticles = 1000000000\n"))
+    bad_setup = root / "observed_bad"
+    bad_setup.mkdir()
+    (bad_setup / "setup.json").write_text("{ broken")
+    missing_field = root / "observed_field"
+    missing_field.mkdir()
+    (missing_field / "setup.json").write_text(json.dumps({"frame_interval_s": 0.05, "frames": 10}))
+    return root
+
+
+def _run_config(tip: str = "[22.6, 19.0, 18.7]", extra: str = "") -> str:
+    return f'''
+[sweep]
+path = "masks"
+spacing_mm = 0.2
+gap_mm = 1.0
+[frames]
+path = "good.nii.gz"
+frame_interval_s = 0.05
+[initial_contour]
+path = "contour.csv"
+[geometry]
+row0_col0_mm = [1.0, -8.0]
+frames_plane_z_mm = 18.7
+[tank]
+size_mm = [44.0, 40.0, 36.0]
+water_depth_mm = 6.0
+[bar]
+tip_at_rest_mm = {tip}
+''' + extra
+
+
+def _main(argv: list[str]) -> tuple[int, str]:
+    """Run the console script in-process; (exit status, what it wrote to standard error)."""
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            main(argv)
+            status = 0
+        except SystemExit as exc:
+            status = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    return status, err.getvalue()
+
+
+def _snapshot(root: Path) -> dict[str, str]:
+    out = {}
+    for p in root.rglob("*"):
+        if p.is_file() and not p.is_symlink():
+            out[str(p.relative_to(root))] = hashlib.sha1(p.read_bytes()).hexdigest()
+    return out
+
+
+# ---------------------------------------------------------------- the cases
+# (arguments, a word the one-line error must contain); paths are relative to the scratch folder
+CASES = [
+    # hifumotion info: files that are not images, values that are not values
+    (["info", "missing.png"], "missing.png"),
+    (["info", "fifo.png"], "fifo.png"),
+    (["info", "/dev/null"], "/dev/null"),
+    (["info", "empty.png"], "empty.png"),
+    (["info", "garbage.png"], "garbage.png"),
+    (["info", "truncated.nii.gz"], "truncated.nii.gz"),
+    (["info", "nan.mha"], "nan.mha"),
+    (["info", "inf.mha"], "inf.mha"),
+    (["info", "negative_pixdim.nii"], "negative_pixdim.nii"),
+    (["info", "empty_folder"], "empty_folder"),
+    (["info", "image.png", "--spacing", "-1"], "--spacing"),
+    (["info", "image.png", "--spacing", "abc"], "--spacing"),
+    (["info", "image.png", "--spacing", "nan"], "--spacing"),
+    (["info", "image.png", "--kind", "nope"], "kind"),
+    (["info", "image.png", "--frame-interval", "0"], "--frame-interval"),
+    # hifumotion segment
+    (["segment", "ph/images/phantom.png", "--init", "missing.json", "-o", "out"], "missing.json"),
+    (["segment", "ph/images/phantom.png", "--init", "bad.json", "-o", "out"], "bad.json"),
+    (["segment", "ph/images/phantom.png", "--init", "huge_init.json", "-o", "out"], "huge_init.json"),
+    (["segment", "ph/images/phantom.png", "--init", "negative_init.json", "-o", "out"], "negative_init.json"),
+    (["segment", "ph/images/phantom.png", "--init", "outside_init.json", "-o", "out"], "outside_init.json"),
+    (["segment", "ph/images/phantom.png", "--init", "grey_mask.png", "-o", "out"], "grey_mask.png"),
+    (["segment", "ph/images/phantom.png", "--init", "small_mask.png", "-o", "out"], "small_mask.png"),
+    (["segment", "ph/images/phantom.png", "--init", "fifo.png", "-o", "out"], "fifo.png"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-m", "nope", "-o", "out"], "--method"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "--init-kind", "nope", "-o", "out"], "--init-kind"),
+    (["segment", "nan.mha", "--init", "ph/init.json", "-o", "out"], "nan.mha"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "ph", "--overwrite"], "ph"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", ".", "--overwrite"], "working folder"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "notes", "--overwrite"], "notes"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "notes"], "notes"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "afile.txt/sub"], "afile.txt"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "afile.txt"], "afile.txt"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "/proc/hifumotion-out"], "/proc"),
+    # hifumotion compare
+    (["compare", "ph", "--limit", "-1", "-o", "out"], "--limit"),
+    (["compare", "ph", "--limit", "0", "-o", "out"], "--limit"),
+    (["compare", "missing_dir", "-o", "out"], "missing_dir"),
+    (["compare", "empty_folder", "-o", "out"], "empty_folder"),
+    (["compare", "ph", "--methods", "nope", "-o", "out"], "--methods"),
+    (["compare", "ph", "--init-kind", "nope", "-o", "out"], "--init-kind"),
+    # hifumotion phantom
+    (["phantom", "--seed", "-1", "-o", "out"], "--seed"),
+    (["phantom", "--size", "60000", "-o", "out"], "--size"),
+    (["phantom", "--size", "10", "-o", "out"], "--size"),
+    (["phantom", "--spacing", "0", "-o", "out"], "--spacing"),
+    (["phantom", "--spacing", "inf", "-o", "out"], "--spacing"),
+    (["phantom", "--shape", "nope", "-o", "out"], "--shape"),
+    (["phantom", "--preset", "nope", "-o", "out"], "--preset"),
+    (["phantom", "-o", ".", "--overwrite"], "working folder"),
+    (["phantom", "-o", "/proc/hifumotion-out"], "/proc"),
+    (["phantom", "-o", "afile.txt/sub"], "afile.txt"),
+    # hifumotion reconstruct
+    (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--voxel", "0", "-o", "out"], "--voxel"),
+    (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--voxel", "0.001", "-o", "out"], "--voxel"),
+    (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--particle-spacing", "0.001", "-o", "out"],
+     "--particle-spacing"),
+    (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--particle-spacing", "-1", "-o", "out"],
+     "--particle-spacing"),
+    (["reconstruct", "masks", "--slice-spacing", "-1", "-o", "out"], "--slice-spacing"),
+    (["reconstruct", "grey_masks", "--slice-spacing", "1", "-o", "out"], "grey_masks"),
+    (["reconstruct", "image.png", "--slice-spacing", "1", "-o", "out"], "image.png"),
+    # hifumotion simulate / validate
+    (["simulate", "scene_fine.toml", "-o", "out"], "spacing_mm"),
+    (["simulate", "scene_tip.toml", "-o", "out"], "tip_mm"),
+    (["simulate", "scene_force.toml", "-o", "out"], "force_n"),
+    (["simulate", "scene_schedule.toml", "-o", "out"], "schedule"),
+    (["simulate", "scene_key.toml", "-o", "out"], "forse_n"),
+    (["simulate", "scene_broken.toml", "-o", "out"], "scene_broken.toml"),
+    (["simulate", "missing_scene.toml", "-o", "out"], "missing_scene.toml"),
+    (["simulate", "fifo.png", "-o", "out"], "fifo.png"),
+    (["simulate"], "--output"),
+    (["validate", "nope"], "nope"),
+    # hifumotion experiment
+    (["experiment", "--config", "missing.toml", "-o", "out"], "missing.toml"),
+    (["experiment", "--preset", "nope", "-o", "out"], "nope"),
+    (["experiment", "--seed", "-1", "-o", "out"], "--seed"),
+    (["experiment", "--preset", "small"], "--output"),
+    # hifumotion calibrate / predict / score
+    (["calibrate", "ph", "-o", "out"], "setup.json"),
+    (["calibrate", "missing_dir", "-o", "out"], "missing_dir"),
+    (["calibrate", "observed_bad", "-o", "out"], "setup.json"),
+    (["calibrate", "observed_field", "-o", "out"], "setup.json"),
+    (["calibrate", "ph", "-o", "out", "--particles", "0"], "--particles"),
+    (["calibrate", "ph", "-o", "out", "--particles", "1000000000"], "--particles"),
+    (["calibrate", "ph", "-o", "out", "--search-particles", "0"], "--search-particles"),
+    (["calibrate", "ph", "-o", "out", "--force", "-1"], "--force"),
+    (["calibrate", "ph", "-o", "out", "--workers", "0"], "--workers"),
+    (["calibrate", "ph", "-o", "out", "--max-evaluations", "0"], "--max-evaluations"),
+    (["calibrate", "ph", "-o", "out", "--boundary-offset", "100"], "--boundary-offset"),
+    (["calibrate", "ph", "-o", "out", "--resume", "resume.jsonl"], "resume.jsonl"),
+    (["calibrate", "ph", "-o", "out", "--resume", "missing.jsonl"], "missing.jsonl"),
+    (["calibrate", "ph", "-o", "out", "--method", "nope"], "--method"),
+    (["predict", "ph", "-o", "out"], "ph"),
+    (["predict", "missing_dir", "-o", "out"], "missing_dir"),
+    (["score", "missing_dir", "ph"], "missing_dir"),
+    (["score", "ph", "ph", "--spacing", "-1"], "--spacing"),
+    # hifumotion demo / run
+    (["demo", "--particles", "0", "-o", "out"], "--particles"),
+    (["demo", "--preset", "nope", "-o", "out"], "--preset"),
+    (["demo", "--images", "-1", "-o", "out"], "--images"),
+    (["demo", "--workers", "0", "-o", "out"], "--workers"),
+    (["demo", "--max-evaluations", "0", "-o", "out"], "--max-evaluations"),
+    (["demo", "--dataset", "missing_dir", "-o", "out"], "missing_dir"),
+    (["demo", "-o", ".", "--overwrite"], "working folder"),
+    (["run", "missing.toml"], "missing.toml"),
+    (["run"], "CONFIG"),
+    (["run", "run_tip.toml", "-o", "out"], "tip"),
+    (["run", "run_key.toml", "-o", "out"], "particels"),
+    (["run", "run_particles.toml", "-o", "out"], "particles"),
+    (["run", "fifo.png", "-o", "out"], "fifo.png"),
+]
+
+
+@pytest.mark.parametrize("argv, word", CASES, ids=[" ".join(c[0])[:60] for c in CASES])
+def test_a_mistake_is_one_line_naming_it_and_changes_nothing(scratch, argv, word, monkeypatch):
+    monkeypatch.chdir(scratch)
+    before = _snapshot(scratch)
+    t0 = time.perf_counter()
+    status, err = _main(argv)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert status == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error:"), err
+    assert "Traceback" not in err
+    assert word.lower() in lines[0].lower(), lines[0]
+    after = _snapshot(scratch)
+    assert {k: v for k, v in after.items() if k in before} == before     # nothing there before changed
+    assert not (scratch / "out").exists()                                # and no output was left
+    assert not [p for p in scratch.iterdir() if p.name.endswith(".partial")]
+    assert time.perf_counter() - t0 < 120                                # refused before the work, not after
+
+
+def test_enough_hostile_cases():
+    assert len(CASES) >= 60 and len({c[0][0] for c in CASES}) >= 13
+
+
+def test_overwrite_replaces_only_what_hifumotion_wrote(scratch, monkeypatch):
+    monkeypatch.chdir(scratch)
+    assert _main(["phantom", "--seed", "2", "--size", "64", "-o", "again"])[0] == 0
+    first = (scratch / "again" / "images" / "phantom.png").read_bytes()
+    status, err = _main(["phantom", "--seed", "2", "--size", "64", "-o", "again"])
+    assert status == 2 and "--overwrite" in err
+    assert _main(["phantom", "--seed", "3", "--size", "64", "-o", "again", "--overwrite"])[0] == 0
+    assert (scratch / "again" / "images" / "phantom.png").read_bytes() != first
+    assert (scratch / "notes" / "keep.txt").read_text() == "a user's own file\n"
+
+
+def test_info_prints_its_table_on_standard_output(scratch):
+    proc = subprocess.run(CLI + ["info", str(scratch / "image.png"), "--spacing", "0.2"], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0 and "spacing_mm" in proc.stdout and "spacing_mm" not in proc.stderr
+
+
+def test_a_fifo_is_refused_at_once(scratch):
+    proc = subprocess.run(CLI + ["info", str(scratch / "fifo.png")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "fifo.png" in proc.stderr and "regular file" in proc.stderr
+
+
+def test_sigterm_leaves_no_partial_folder(tmp_path):
+    proc = subprocess.Popen(CLI + ["-q", "experiment", "--preset", "small", "--seed", "5", "-o", "twin"],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 90
+    while time.time() < deadline and not list(tmp_path.glob(".twin.*.partial")):
+        time.sleep(0.2)
+    assert list(tmp_path.glob(".twin.*.partial")), "the run never started writing"
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode != 0
+    assert not list(tmp_path.glob(".twin*")) and not (tmp_path / "twin").exists(), err
