@@ -156,7 +156,7 @@ class Contour:
 
     def to_mask(self, shape: tuple[int, int]) -> np.ndarray:
         """Rasterise: ``True`` for every pixel whose centre lies inside the polygon (even-odd rule)."""
-        from hifumotion.segmentation._kernels import fill_polygon
+        from hifumotion._polygon import fill_polygon
 
         pts = self.points_px
         return fill_polygon(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), int(shape[0]), int(shape[1]))

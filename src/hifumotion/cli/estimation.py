@@ -31,46 +31,32 @@ def calibrate(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Estimate force/Young's modulus, Poisson's ratio, β1, β2 from the training frames (Table 1 and better)."""
-    import shutil
-
     from hifumotion.console import StageBars
-    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate as run_calibration
     from hifumotion.estimation.evaluator import check_search_log
-    from hifumotion.estimation.model import ModelSettings
-    from hifumotion.estimation.prepare import prepare
-    from hifumotion.estimation.protocol import parse_frames
-    from hifumotion.estimation.store import save_calibration
-    from hifumotion.observed import load_observed
+    from hifumotion.estimation.protocol import default_frames, parse_frames
     from hifumotion.io import output_folder
+    from hifumotion.observed import load_observed
     from hifumotion.run_info import RunRecord
+    from hifumotion.workflow.pipeline import EstimationConfig, observe_and_calibrate
 
     if method not in ("least_squares", "cmaes", "table1"):
         raise InputError(f"expected least_squares, cmaes or table1, got {method!r}", "--method")
     if resume is not None:
         check_search_log(resume)
     observed = load_observed(observed_dir)
-    frames = parse_frames(training, len(observed.frames), "--training")
-    settings = CalibrationSettings(method=method, training_frames=frames, force_n=force,
-                                   search_particles=search_particles, model=ModelSettings(tissue_particles=particles),
-                                   max_evaluations=max_evaluations,
-                                   workers=workers, scheduler_address=scheduler_address)
-    record = RunRecord("calibrate", config={"observed": str(observed_dir), "method": method, "training": frames,
-                                            "contours": None if contours is None else str(contours), "force_n": force,
-                                            "particles": particles, "search_particles": search_particles,
-                                            "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset,
-                                            "workers": workers, "scheduler_address": scheduler_address})
+    frames = parse_frames(training, len(observed.frames), "--training") or default_frames(len(observed.frames))[0]
+    settings = EstimationConfig(method=method, force_n=force, particles=particles, search_particles=search_particles,
+                                max_evaluations=max_evaluations, boundary_offset_mm=boundary_offset, workers=workers,
+                                scheduler_address=scheduler_address)
+    record = RunRecord("calibrate", config={"observed": str(observed_dir), "training": frames,
+                                            "contours": None if contours is None else str(contours),
+                                            **settings.model_dump(mode="json")})
     with output_folder(output, overwrite, inputs=(observed_dir, contours, resume)) as out:
-        log = out / "search_log.jsonl"
-        if resume is not None:
-            shutil.copyfile(resume, log)
         with StageBars() as progress:
-            with record.stage("observe"):
-                observation = prepare(observed, contours, progress=progress, boundary_offset_mm=boundary_offset)
-            with record.stage("calibrate"):
-                cal = run_calibration(observation, settings, log_path=log, progress=progress)
-        with record.stage("write"):
-            summary = save_calibration(cal, out, observed_dir)
-        record.extra["fit"] = {k: summary["fit"][k] for k in ("method", "cost_mm", "runs")}
+            _, cal = observe_and_calibrate(observed, out, settings, frames, contours, record=record,
+                                           progress=progress, observed_dir=observed_dir, resume_log=resume)
+        summary = cal.summary
+        record.extra["fit"] = {k: summary["fit"][k] for k in ("method", "cost_mm", "runs", "failed_runs")}
         record.write(out)
     p = summary["parameters"]
     console.print(f"calibrated on frames {summary['training_frames']} with {summary['fit']['method']} "
@@ -99,9 +85,9 @@ def predict(
     from hifumotion.estimation.store import load_calibration
     import numpy as np
 
-    from hifumotion.io import output_folder, write_json
+    from hifumotion.io import output_folder
     from hifumotion.io.files import write_text
-    from hifumotion.prediction.pipeline import predict_calibrated, write_particles, write_prediction
+    from hifumotion.prediction.pipeline import predict_calibrated, write_prediction_folder
     from hifumotion.run_info import RunRecord
 
     spec, k, reference, meta = load_calibration(calibration_dir)
@@ -131,15 +117,7 @@ def predict(
                     online_predictions(pred, spec, reference, observed, horizons, now), observed, pred.pixel_mm,
                     spec.frame_interval_s))
         with record.stage("write"):
-            write_prediction(out, pred, wanted, spec.frame_interval_s)
-            write_particles(out, pred, spec.frame_interval_s)
-            window = (max(wanted) - min(valid)) * spec.frame_interval_s if max(wanted) > min(valid) else None
-            write_json(out / "prediction.json", {
-                "frames": wanted, "parameters": k.as_dict(), "seconds": seconds,
-                "simulated_s": max(wanted) * spec.frame_interval_s,
-                "validation_window_s": window,
-                "realtime_ratio": None if not window else seconds / window,
-            })
+            write_prediction_folder(out, pred, wanted, spec.frame_interval_s, valid, seconds)
         record.write(out)
     console.print(f"predicted {len(wanted)} frames in {seconds:.0f} s; masks, contours.csv and aim.csv in "
                   f"{output.resolve()}", highlight=False)

@@ -81,6 +81,7 @@ class Calibration:
     runs: int
     timings_s: dict = field(default_factory=dict)
     failed_runs: int = 0            # forward runs that failed (logged, not used as data)
+    summary: dict | None = None     # parameters.json, once written
 
     def report(self) -> dict:
         """Values with uncertainties and what is identifiable, as written to ``parameters.json``."""

@@ -138,5 +138,26 @@ def write_particles(folder: str | Path, pred: Prediction, frame_interval_s: floa
     return write_pvd(folder / "tissue.pvd", entries)
 
 
-__all__ = ["online_predictions", "online_csv", "predict_calibrated", "write_prediction", "write_particles", "aim_csv",
+def write_prediction_folder(folder: str | Path, pred: Prediction, frames, frame_interval_s: float,
+                            validation, seconds: float) -> dict:
+    """Everything ``prediction/`` holds, for ``hifumotion predict`` and the pipeline alike:
+    masks, ``contours.csv``, ``aim.csv`` (:func:`write_prediction`), ``tissue.pvd``
+    (:func:`write_particles`) and ``prediction.json`` — the frames, the parameters, the
+    prediction's wall time, the simulated span and the validation window (s) and their ratio
+    (below 1: faster than the window lasts). Returns ``prediction.json``'s contents."""
+    from hifumotion.io import write_json
+
+    frames = sorted(int(f) for f in frames)
+    write_prediction(folder, pred, frames, frame_interval_s)
+    write_particles(folder, pred, frame_interval_s)
+    validation = sorted(int(f) for f in validation)
+    window = (validation[-1] - validation[0]) * frame_interval_s if len(validation) > 1 else None
+    summary = {"frames": frames, "parameters": pred.run.parameters.as_dict(), "seconds": seconds,
+               "simulated_s": max(frames) * frame_interval_s, "validation_frames": validation,
+               "validation_window_s": window, "realtime_ratio": None if not window else seconds / window}
+    write_json(Path(folder) / "prediction.json", summary)
+    return summary
+
+
+__all__ = ["write_prediction_folder", "online_predictions", "online_csv", "predict_calibrated", "write_prediction", "write_particles", "aim_csv",
            "shift_mask"]

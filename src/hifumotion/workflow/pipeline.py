@@ -77,6 +77,41 @@ class PipelineOutcome:
         return self.predict_s / window if window > 0 else float("nan")
 
 
+def observe_and_calibrate(observed: Observed, folder: str | Path, settings: EstimationConfig, training: list[int],
+                          contours_csv: str | Path | None = None, record=None, progress: Progress | None = None,
+                          observed_dir: str | Path | None = None, resume_log: str | Path | None = None):
+    """Steps 1–2 (observe, calibrate) into ``folder`` (the calibration folder): what
+    :func:`run_pipeline` and ``hifumotion calibrate`` both run. ``resume_log``: the search log
+    of an interrupted calibration, whose runs are not repeated. Returns the observation and
+    the :class:`~hifumotion.estimation.calibrate.Calibration`."""
+    import shutil
+    from contextlib import nullcontext
+
+    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate
+    from hifumotion.estimation.model import ModelSettings
+    from hifumotion.estimation.prepare import prepare
+    from hifumotion.estimation.store import save_calibration
+
+    s = settings
+    folder = Path(folder)
+    tell = progress or (lambda stage, fraction: None)
+    stage = record.stage if record is not None else (lambda name: nullcontext())
+    folder.mkdir(parents=True, exist_ok=True)
+    log = folder / "search_log.jsonl"
+    if resume_log is not None:
+        shutil.copyfile(resume_log, log)
+    with stage("observe: segment sweep, reconstruct, track"):
+        observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm)
+    with stage("calibrate"):
+        cal = calibrate(observation, CalibrationSettings(
+            method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
+            model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations,
+            workers=s.workers, scheduler_address=s.scheduler_address), log_path=log, progress=tell)
+    with stage("write the calibration"):
+        cal.summary = save_calibration(cal, folder, observed_dir)
+    return observation, cal
+
+
 def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: EstimationConfig | None = None,
                  contours_csv: str | Path | None = None, truth_masks: dict | None = None,
                  truth_kind: str = "expert masks", truth_parameters: dict | None = None,
@@ -94,16 +129,12 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
     """
     from contextlib import nullcontext
 
-    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate
-    from hifumotion.estimation.model import ModelSettings
-    from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import default_frames, parse_frames
-    from hifumotion.estimation.store import save_calibration
     from hifumotion.observed import load_observed
     from hifumotion.io import write_json
     from hifumotion.io.files import write_text
     from hifumotion.prediction.evaluate import evaluate, online_schedule
-    from hifumotion.prediction.pipeline import online_csv, predict_calibrated, write_particles, write_prediction
+    from hifumotion.prediction.pipeline import online_csv, predict_calibrated, write_prediction_folder
     from hifumotion.scoring import overlay_figure
 
     s = settings or EstimationConfig()
@@ -118,16 +149,8 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
     training = parse_frames(s.training_frames, n, "estimation.training_frames") or auto_train
     validation = parse_frames(s.validation_frames, n, "estimation.validation_frames") or auto_valid
 
-    with stage("observe: segment sweep, reconstruct, track"):
-        observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm)
-    with stage("calibrate"):
-        (out / "calibration").mkdir(parents=True, exist_ok=True)
-        cal = calibrate(observation, CalibrationSettings(
-            method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
-            model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations,
-            workers=s.workers, scheduler_address=s.scheduler_address),
-            log_path=out / "calibration" / "search_log.jsonl", progress=tell)
-        save_calibration(cal, out / "calibration", observed_dir)
+    observation, cal = observe_and_calibrate(observed, out / "calibration", s, training, contours_csv,
+                                             record=record, progress=tell, observed_dir=observed_dir)
 
     with stage("predict"):
         tell("predict", 0.0)
@@ -137,11 +160,8 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
         pred = predict_calibrated(cal.spec, cal.parameters, reference, sorted(set(training) | set(validation)), keep)
         predict_s = time.perf_counter() - t0
         folder = out / "prediction"
-        write_prediction(folder, pred, sorted(set(training) | set(validation)), observed.frame_interval_s)
-        write_particles(folder, pred, observed.frame_interval_s)
-        write_json(folder / "prediction.json", {
-            "frames": sorted(pred.masks), "parameters": cal.parameters.as_dict(), "seconds": predict_s,
-            "validation_window_s": (validation[-1] - validation[0]) * observed.frame_interval_s})
+        write_prediction_folder(folder, pred, sorted(set(training) | set(validation)), observed.frame_interval_s,
+                                validation, predict_s)
         tell("predict", 1.0)
 
     with stage("score"):
@@ -178,4 +198,4 @@ def outcome_summary(o: PipelineOutcome) -> dict:
     return {k: (round(v, 5) if isinstance(v, float) and np.isfinite(v) else v) for k, v in out.items()}
 
 
-__all__ = ["EstimationConfig", "PipelineOutcome", "run_pipeline", "outcome_summary"]
+__all__ = ["EstimationConfig", "PipelineOutcome", "observe_and_calibrate", "run_pipeline", "outcome_summary"]
