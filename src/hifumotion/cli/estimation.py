@@ -31,6 +31,7 @@ def calibrate(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Estimate force/Young's modulus, Poisson's ratio, β1, β2 from the training frames (Table 1 and better)."""
+    from hifumotion.config import validate_config
     from hifumotion.console import StageBars
     from hifumotion.estimation.evaluator import check_search_log
     from hifumotion.estimation.protocol import default_frames, parse_frames
@@ -45,9 +46,10 @@ def calibrate(
         check_search_log(resume)
     observed = load_observed(observed_dir)
     frames = parse_frames(training, len(observed.frames), "--training") or default_frames(len(observed.frames))[0]
-    settings = EstimationConfig(method=method, force_n=force, particles=particles, search_particles=search_particles,
-                                max_evaluations=max_evaluations, boundary_offset_mm=boundary_offset, workers=workers,
-                                scheduler_address=scheduler_address)
+    settings = validate_config(EstimationConfig, {
+        "method": method, "force_n": force, "particles": particles, "search_particles": search_particles,
+        "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset, "workers": workers,
+        "scheduler_address": scheduler_address}, "options")
     record = RunRecord("calibrate", config={"observed": str(observed_dir), "training": frames,
                                             "contours": None if contours is None else str(contours),
                                             **settings.model_dump(mode="json")})

@@ -106,10 +106,7 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
 def _make_parent(final: Path, shown: Path) -> None:
     try:
         final.parent.mkdir(parents=True, exist_ok=True)
-    except FileExistsError:
-        raise InputError("cannot create the output folder here: a part of its path is a file, not a folder",
-                         shown) from None
-    except NotADirectoryError:
+    except (FileExistsError, NotADirectoryError):
         raise InputError("cannot create the output folder here: a part of its path is a file, not a folder",
                          shown) from None
     except OSError as exc:

@@ -85,6 +85,7 @@ def _stack(folder: Path, pattern: str, shape: tuple[int, int]) -> np.ndarray:
 
 def load_observed(folder: str | Path) -> Observed:
     """Read ``folder`` (module docstring); a missing or malformed part is one clear error."""
+    from hifumotion.io.files import require_regular_file
     from hifumotion.io.writers import read_contours_csv
 
     root = Path(folder)
@@ -99,9 +100,7 @@ def load_observed(folder: str | Path) -> Observed:
     frames = _stack(root / "frames", "frame_*.png", shape)
     if len(frames) != setup.frames:
         raise InputError(f"{len(frames)} frame images; setup.json says frames = {setup.frames}", root / "frames")
-    pos_path = root / "sweep_positions.csv"
-    if not pos_path.is_file():
-        raise InputError("no such file", pos_path)
+    pos_path = require_regular_file(root / "sweep_positions.csv", "sweep_positions.csv")
     with open(pos_path, newline="", encoding="utf-8") as fh:
         try:
             z = np.array([float(r["z_mm"]) for r in csv.DictReader(fh)])

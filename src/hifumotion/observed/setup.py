@@ -111,8 +111,6 @@ class Setup(ConfigModel):
     frame_interval_s: float = Field(gt=0, description="time between frames (s)")
     frames: int = Field(ge=2, description="number of frames of the time series")
     initial_contour_frame: int = Field(0, ge=0, description="the frame the clicked contour outlines")
-    frame_files: str = Field("frames/frame_%04d.png", description="file pattern of the frames")
-    sweep_files: str = Field("sweep/slice_%03d.png", description="file pattern of the sweep's planes")
     imaging: ImagingGeometry
     tank: TankSetup
     bar: BarSetup
@@ -148,9 +146,9 @@ def write_setup(path: str | Path, setup: Setup) -> Path:
 def read_setup(path: str | Path) -> Setup:
     """``setup.json`` as a :class:`Setup`; a missing, malformed or invalid file is one
     :class:`~hifumotion.errors.InputError` naming the file and the field."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such file (an observed folder needs its setup.json)", p)
+    from hifumotion.io.files import require_regular_file
+
+    p = require_regular_file(path, "setup.json")
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -161,6 +159,8 @@ def read_setup(path: str | Path) -> Setup:
         # written before the schedule had a section of its own: the bar carried the ramp
         bar = dict(data["bar"])
         data = {**data, "bar": bar, "push": {"shape": "ramp_hold", "ramp_s": bar.pop("force_ramp_s")}}
+    for key in ("frame_files", "sweep_files"):     # the earlier layout named its (fixed) file patterns
+        data.pop(key, None)
     data.setdefault("schema_version", SCHEMA_VERSION)
     if data["schema_version"] != SCHEMA_VERSION:
         raise InputError(f"schema_version {data['schema_version']!r}; this hifumotion reads version {SCHEMA_VERSION}", p)

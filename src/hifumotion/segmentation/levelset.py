@@ -107,20 +107,23 @@ def check_init(init: Any, shape: tuple[int, int], where: str = "init") -> None:
                              "expected one inside the image", where)
         lo = np.array([init.cx, init.cy]) - max(init.a, init.b)
         hi = np.array([init.cx, init.cy]) + max(init.a, init.b)
-    elif isinstance(init, (ClickedPoints, Contour)) or (np.ndim(init) == 2 and np.shape(init)[1:] == (2,)
-                                                      and np.shape(init) != tuple(shape)):
-        pts = init.array if isinstance(init, ClickedPoints) else (
-            init.points_px if isinstance(init, Contour) else np.asarray(init, float))
+    else:
+        if isinstance(init, ClickedPoints):
+            pts = init.array
+        elif isinstance(init, Contour):
+            pts = init.points_px
+        else:
+            pts = np.asarray(init)
+            if pts.shape == (h, w):
+                return                      # a mask of the image's size
+            if pts.ndim != 2 or pts.shape[1] != 2:
+                raise InputError(f"an initial mask of shape {pts.shape} for an image of shape {(h, w)}", where)
+        pts = np.asarray(pts, float)
         if not np.all(np.isfinite(pts)):
             raise InputError("the initial contour's points must be finite numbers (px)", where)
         lo, hi = pts.min(0), pts.max(0)
         if np.any(hi - lo > 4 * np.hypot(h, w)):
             raise InputError(f"the initial contour spans {hi - lo} px on a {h} × {w} px image", where)
-    else:
-        arr = np.asarray(init)
-        if arr.shape != tuple(shape):
-            raise InputError(f"an initial mask of shape {arr.shape} for an image of shape {tuple(shape)}", where)
-        return
     if hi[0] < 0 or hi[1] < 0 or lo[0] > w - 1 or lo[1] > h - 1:
         raise InputError(f"the initial contour (x {lo[0]:.0f}…{hi[0]:.0f}, y {lo[1]:.0f}…{hi[1]:.0f} px) lies outside "
                          f"the {h} × {w} px image", where)

@@ -20,7 +20,7 @@ from pydantic import Field, model_validator
 
 from hifumotion.config import ConfigModel
 from hifumotion.errors import InputError
-from hifumotion.observed import BarSetup, ImagingGeometry, PushSchedule, Setup, TankSetup
+from hifumotion.observed import BarSetup, PushSchedule, Setup, TankSetup
 from hifumotion.observed.setup import check_bar_in_tank
 from hifumotion.workflow.pipeline import EstimationConfig, outcome_summary, run_pipeline
 
@@ -138,8 +138,7 @@ def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
     """Write the ``observed/`` layout (``setup.json``, ``sweep/``, ``frames/``, ``sweep_positions.csv``,
     ``initial_contour.csv``) from the user's files; every missing or inconsistent piece is one
     :class:`~hifumotion.errors.InputError` naming the file or field."""
-    from pydantic import ValidationError
-
+    from hifumotion.config import validate_config
     from hifumotion.io import read_sequence
     from hifumotion.io.writers import read_contours_csv
     from hifumotion.observed import write_observed
@@ -184,19 +183,15 @@ def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
         raise InputError(f"no contour of frame {cfg.initial_contour.frame} (initial_contour.frame); frames given: "
                          f"{', '.join(contours)}", contour_path)
 
-    try:
-        setup = Setup(
-            description="assembled by hifumotion run from the user's files",
-            frame_interval_s=float(frames.frame_interval_s), frames=int(len(frames.frames)),
-            initial_contour_frame=cfg.initial_contour.frame,
-            imaging=ImagingGeometry(image_shape=tuple(frames.frames.shape[1:]), pixel_mm=float(frames.spacing_mm[0]),
-                                    row0_col0_mm=tuple(cfg.geometry.row0_col0_mm),
-                                    frames_plane_z_mm=cfg.geometry.frames_plane_z_mm, sweep_z_mm=z.tolist()),
-            tank=cfg.tank, bar=cfg.bar, push=cfg.push,
-            sources={"sweep": str(sweep_path), "frames": str(frames_path)})
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        raise InputError(f"{err['msg']}", ".".join(str(p) for p in err["loc"]) or "configuration") from None
+    imaging = {"image_shape": tuple(frames.frames.shape[1:]), "pixel_mm": float(frames.spacing_mm[0]),
+               "row0_col0_mm": tuple(cfg.geometry.row0_col0_mm),
+               "frames_plane_z_mm": cfg.geometry.frames_plane_z_mm, "sweep_z_mm": z.tolist()}
+    setup = validate_config(Setup, {
+        "description": "assembled by hifumotion run from the user's files",
+        "frame_interval_s": float(frames.frame_interval_s), "frames": int(len(frames.frames)),
+        "initial_contour_frame": cfg.initial_contour.frame, "imaging": imaging,
+        "tank": cfg.tank, "bar": cfg.bar, "push": cfg.push,
+        "sources": {"sweep": str(sweep_path), "frames": str(frames_path)}}, "the images' geometry")
     write_observed(folder, setup, _as_uint8(sweep.frames, cfg.sweep.flip_rows), z,
                    _as_uint8(frames.frames, cfg.frames.flip_rows), wanted[0])
     return folder
