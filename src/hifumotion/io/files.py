@@ -66,9 +66,9 @@ def require_regular_file(path: str | Path, what: str = "file") -> Path:
     import stat
 
     if stat.S_ISDIR(mode):
-        raise InputError(f"is a folder; expected a {what}", p)
+        raise InputError(f"is a folder; expected a file ({what})", p)
     if not stat.S_ISREG(mode):
-        raise InputError(f"is not a regular file (a FIFO, device or socket); expected a {what}", p)
+        raise InputError(f"is not a regular file (a FIFO, device or socket); expected a regular {what}", p)
     return p
 
 
