@@ -66,6 +66,7 @@ def build_scratch(root: Path) -> Path:
         _write_png(root / "masks" / f"slice_{k:03d}.png", (disc * 255).astype(np.uint8))
         _write_png(root / "grey_masks" / f"slice_{k:03d}.png", (disc * 128 + 40).astype(np.uint8))
     _write_png(root / "grey_mask.png", (disc * 128 + 40).astype(np.uint8))
+    _write_png(root / "mask40.png", (disc[12:52, 12:52] * 255).astype(np.uint8))    # fits good.nii.gz's 40 × 40
     _write_png(root / "small_mask.png", np.zeros((10, 10), np.uint8))
     (root / "empty.png").write_bytes(b"")
     (root / "garbage.png").write_bytes(rng.bytes(300))
@@ -179,6 +180,18 @@ CASES = [
     (["info", "image.png", "--kind", "nope"], "kind"),
     (["info", "image.png", "--frame-interval", "0"], "--frame-interval"),
     # hifumotion segment
+    # hifumotion track: a cine and what it needs
+    (["track", "good.nii.gz", "-o", "out"], "--init"),
+    (["track", "image.png", "--init", "mask40.png", "-o", "out"], "frame"),
+    (["track", "good.nii.gz", "--init", "missing.json", "-o", "out"], "missing.json"),
+    (["track", "good.nii.gz", "--init", "grey_mask.png", "-o", "out"], "grey_mask.png"),
+    (["track", "good.nii.gz", "--init", "small_mask.png", "-o", "out"], "small_mask.png"),
+    (["track", "good.nii.gz", "--init", "mask40.png", "--estimator", "magic", "-o", "out"], "estimator"),
+    (["track", "good.nii.gz", "--init", "mask40.png", "--bar", "small_mask.png", "-o", "out"], "small_mask.png"),
+    (["track", "good.nii.gz", "--init", "mask40.png", "--setup", "observed_bad/setup.json", "-o", "out"], "setup.json"),
+    (["track", "observed_field", "-o", "out"], "setup.json"),
+    (["calibrate", "observed_field", "--objective", "shape", "-o", "out"], "--objective"),
+    (["calibrate", "observed_field", "--tracking", "magic", "-o", "out"], "--tracking"),
     (["segment", "ph/images/phantom.png", "--init", "missing.json", "-o", "out"], "missing.json"),
     (["segment", "ph/images/phantom.png", "--init", "bad.json", "-o", "out"], "bad.json"),
     (["segment", "ph/images/phantom.png", "--init", "huge_init.json", "-o", "out"], "huge_init.json"),

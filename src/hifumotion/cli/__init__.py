@@ -1,7 +1,7 @@
 """The ``hifumotion`` command line: one program, one subcommand per stage.
 
 Each command is a thin adapter in its own module (``info``, ``segment``, ``imaging``,
-``reconstruct``, ``particles``, ``experiment``, ``estimation``, ``score``, ``workflow``)
+``reconstruct``, ``particles``, ``experiment``, ``estimation``, ``score``, ``track``, ``workflow``)
 over the same functions the Python API offers; :mod:`.app` holds the Typer application
 they register on.
 
@@ -22,7 +22,7 @@ from typing import Optional
 def _register_commands() -> None:
     """Importing the command modules registers their commands on the app."""
     from hifumotion.cli import (estimation, experiment, imaging, info, particles, reconstruct,  # noqa: F401
-                                score, segment, workflow)
+                                score, segment, track, workflow)
 
 
 def _terminate(signum, frame) -> None:

@@ -19,7 +19,9 @@ def calibrate(
     output: Path = typer.Option(..., "--output", "-o", help="New calibration folder."),
     method: str = typer.Option("least_squares", "--method", help="least_squares (default), cmaes, or table1 (the paper's iterative algorithm)."),
     training: Optional[str] = typer.Option(None, "--training", help="Training frames: '20,30,40' or '20:101:10' (default: the paper's protocol)."),
-    contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of GLCV tracking."),
+    contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of tracking."),
+    objective: str = typer.Option("contour", "--objective", help="contour (the paper's S_t) or contour+displacement (also the speckle-tracked displacement of the contour points)."),
+    tracking: str = typer.Option("speckle", "--tracking", help="speckle (frame 0's contour carried by speckle tracking, default) or glcv (re-segment every frame, as the paper)."),
     force: float = typer.Option(paper.FORCE_N, "--force", callback=positive, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
     particles: int = typer.Option(paper.TISSUE_PARTICLES, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (the paper: 4,399)."),
     search_particles: int = typer.Option(1000, "--search-particles", min=100, max=1_000_000, help="Tissue particles of the coarser model the search runs on."),
@@ -42,13 +44,17 @@ def calibrate(
 
     if method not in ("least_squares", "cmaes", "table1"):
         raise InputError(f"expected least_squares, cmaes or table1, got {method!r}", "--method")
+    if objective not in ("contour", "contour+displacement"):
+        raise InputError(f"expected contour or contour+displacement, got {objective!r}", "--objective")
+    if tracking not in ("speckle", "glcv"):
+        raise InputError(f"expected speckle or glcv, got {tracking!r}", "--tracking")
     if resume is not None:
         check_search_log(resume)
     observed = load_observed(observed_dir)
     frames = parse_frames(training, len(observed.frames), "--training") or default_frames(len(observed.frames))[0]
     settings = validate_config(EstimationConfig, {
         "method": method, "force_n": force, "particles": particles, "search_particles": search_particles,
-        "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset, "workers": workers,
+        "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset, "tracking": tracking, "objective": objective, "workers": workers,
         "scheduler_address": scheduler_address}, "options")
     record = RunRecord("calibrate", config={"observed": str(observed_dir), "training": frames,
                                             "contours": None if contours is None else str(contours),

@@ -26,6 +26,7 @@ from typing import Callable, Literal
 
 import numpy as np
 
+from hifumotion.errors import InputError
 from hifumotion.estimation import fit as fitting
 from hifumotion.estimation.evaluator import Evaluator
 from hifumotion.estimation.iterative import iterative_estimate
@@ -60,6 +61,9 @@ class CalibrationSettings:
     workers: int | None = None
     scheduler_address: str | None = None
     seed: int = 0
+    # "contour": the distances of the model's points to the observed contours (the paper's S_t);
+    # "contour+displacement": also the speckle-tracked displacement of those points
+    objective: str = "contour"
 
 
 @dataclass
@@ -125,9 +129,17 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
 
     t0 = time.perf_counter()
     final = model_spec(observation, s.model)
+    if s.objective not in ("contour", "contour+displacement"):
+        raise InputError(f"unknown objective {s.objective!r}; expected contour or contour+displacement", "objective")
+    if s.objective == "contour+displacement":
+        if observation.motion is None:
+            raise InputError("the displacement objective needs speckle tracking (tracking = speckle)", "objective")
+        data = data.with_displacement(observation.motion.displacement, final.points_mm)
     search_settings = ModelSettings(**{**s.model.__dict__, "tissue_particles": min(s.search_particles,
                                                                                      s.model.tissue_particles)})
     search = model_spec(observation, search_settings)
+    # both models carry the same points A (frame 0's contour), so one set of data serves both
+    assert np.allclose(search.points_mm, final.points_mm)
     timings["model_s"] = time.perf_counter() - t0
 
     asked = {"n": 0}

@@ -223,7 +223,7 @@ class Evaluator:
             except InputError:
                 raise
             except Exception as exc:  # a run that blew up is a bad parameter set, not the end of the fit
-                result = {"residuals_mm": np.full((n, len(self.spec.points_mm)), FAILED_RESIDUAL_MM), "seconds": 0.0,
+                result = {"residuals_mm": np.full((n, self.data.width(len(self.spec.points_mm))), FAILED_RESIDUAL_MM), "seconds": 0.0,
                           "steps": 0, "error": brief(exc)}
                 self.failed += 1
                 log.debug("forward run with %s failed: %s", ks[futures[fut]], brief(exc))

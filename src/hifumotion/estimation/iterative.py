@@ -77,7 +77,7 @@ def iterative_estimate(ev: Evaluator, theta0: np.ndarray, threshold_mm_per_point
                        max_runs: int = 120) -> IterativeResult:
     """Table 1 from ``theta0`` (module docstring); at most ``max_runs`` forward runs."""
     n = len(ev.data.frames)
-    points = len(ev.spec.points_mm)
+    points = ev.data.width(len(ev.spec.points_mm))
     per_point = threshold_mm_per_point if threshold_mm_per_point is not None else ev.data.pixel_mm
     big_t = per_point * points
     theta = np.asarray(theta0, float).copy()

@@ -10,6 +10,13 @@ D̂_t(a) − D_t(a), exact for small steps (see ``docs/decisions.md``).
 
 The observed contours enter as signed distance maps (px, positive inside),
 sampled bilinearly at the model's points projected into the imaging plane.
+
+With speckle tracking (:mod:`hifumotion.speckle`) the observation also measures the
+material points' displacement itself, along the boundary as well as across it. The
+objective can then add, for each point a and training frame t, the in-plane difference
+``(D̂_t(a) − D_t(a)) · q_t(a)`` (mm, both components), weighted by the tracking's quality
+``q`` at a (0 where the point was occluded): the paper's S_t with the tangential part
+that a contour alone cannot give (:meth:`TrainingData.with_displacement`).
 """
 
 from __future__ import annotations
@@ -48,6 +55,27 @@ class TrainingData:
     frames: np.ndarray
     distance_px: np.ndarray
     plane: Plane
+    displacement_mm: np.ndarray | None = None     # (n, M, 2) observed in-plane D_t of the points A
+    displacement_weight: np.ndarray | None = None  # (n, M) its quality (0: not observed)
+
+    def with_displacement(self, series, points_mm: np.ndarray) -> "TrainingData":
+        """These data plus the observed displacement of the model's points A (``points_mm``,
+        ``(M, 3)`` on the frame-0 contour, pool frame) at the training frames, read from a
+        :class:`~hifumotion.speckle.DisplacementSeries` on the imaging plane."""
+        from dataclasses import replace
+
+        px = self.plane.to_pixels(points_mm)
+        disp, weight = [], []
+        for f in self.frames:
+            d, q = series.at(px, int(f))
+            ok = np.isfinite(d).all(1)
+            disp.append(np.where(ok[:, None], d, 0.0))
+            weight.append(np.where(ok, np.clip(q, 0.0, 1.0), 0.0))
+        return replace(self, displacement_mm=np.stack(disp), displacement_weight=np.stack(weight))
+
+    def width(self, points: int) -> int:
+        """Residuals per training frame for ``points`` points A: 1 each, 3 with displacements."""
+        return points * (3 if self.displacement_mm is not None else 1)
 
     @classmethod
     def from_masks(cls, masks: np.ndarray, frames, plane: Plane) -> "TrainingData":
@@ -72,21 +100,30 @@ class TrainingData:
 
 
 def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = None) -> np.ndarray:
-    """``(n, M)`` signed distances (mm) of the model's points to the observed contours.
+    """``(n, M)`` signed distances (mm) of the model's points to the observed contours; with
+    observed displacements, ``(n, 3M)``: those, then the weighted in-plane displacement
+    differences (mm) of each point, x and y in turn.
 
     ``points_mm`` is a run's ``(F, M, 3)`` point positions indexed by frame number;
     row i belongs to training frame ``data.frames[i]``; ``upto`` keeps the first
     ``upto`` training frames. Positive: the model's point lies inside the observed contour.
     """
     n = len(data.frames) if upto is None else int(upto)
-    out = np.empty((n, points_mm.shape[1]))
+    m = points_mm.shape[1]
+    out = np.empty((n, data.width(m)))
+    axes = np.stack([np.asarray(data.plane.u, float), np.asarray(data.plane.v, float)])   # (2, 3)
     for i in range(n):
         f = int(data.frames[i])
         if f >= len(points_mm):
             raise InputError(f"the run ended before training frame {f}", "run")
         xy = data.plane.to_pixels(points_mm[f])
-        out[i] = ndimage.map_coordinates(data.distance_px[i], [xy[:, 1], xy[:, 0]], order=1, mode="nearest")
-    return out * data.pixel_mm
+        out[i, :m] = ndimage.map_coordinates(data.distance_px[i], [xy[:, 1], xy[:, 0]], order=1,
+                                             mode="nearest") * data.pixel_mm
+        if data.displacement_mm is not None:
+            model = (points_mm[f] - points_mm[0]) @ axes.T                     # (M, 2) in-plane, mm
+            diff = (model - data.displacement_mm[i]) * data.displacement_weight[i][:, None]
+            out[i, m:] = diff.ravel()
+    return out
 
 
 def frame_sums_mm(residuals: np.ndarray) -> np.ndarray:

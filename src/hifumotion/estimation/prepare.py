@@ -7,9 +7,13 @@ Only the observer's data is read (``observed/``, :func:`~hifumotion.observed.loa
    nearest the imaging plane (the contour was clicked there, on the resting tissue);
 2. the masks are reconstructed into the 3D tissue (:func:`~hifumotion.reconstruction.reconstruct`)
    and placed in the tank frame from the image geometry of ``setup.json``;
-3. the time series is tracked with GLCV from the same contour
-   (:func:`~hifumotion.segmentation.track`); where the user gives contours of their own
-   (a CSV; the paper used a physician's), those replace the tracked ones.
+3. the time series is tracked: by default frame 0 is segmented with GLCV from the same
+   contour (the known solids taken out of the image) and its contour carried through the
+   frames by the speckle's measured displacement (:func:`~hifumotion.speckle.follow`),
+   whose material points are kept for the fit; ``tracking="glcv"`` re-segments every
+   frame instead (:func:`~hifumotion.segmentation.track`, what the paper did). Where the
+   user gives contours of their own (a CSV; the paper used a physician's), those replace
+   the tracked ones.
 
 Coordinates: the reconstruction is in image mm (x = column × pixel, y = row ×
 pixel, z = the plane's position); the tank frame adds ``offset_mm``
@@ -51,7 +55,10 @@ class Observation:
     frame_masks
         ``(T, H, W)`` bool: the target in every frame (tracked, or the user's where given).
     contour_source
-        ``"glcv"`` or the path of the user's contour file.
+        ``"speckle"``, ``"glcv"`` or the path of the user's contour file.
+    motion
+        The speckle tracking (:class:`~hifumotion.speckle.FollowResult`: the displacement
+        field, the carried contour points and their quality); ``None`` with GLCV tracking.
     timings_s
         Wall time of each step (s).
     """
@@ -63,6 +70,7 @@ class Observation:
     frame_masks: np.ndarray
     contour_source: str
     timings_s: dict = field(default_factory=dict)
+    motion: object | None = None
 
     @property
     def pixel_mm(self) -> float:
@@ -87,24 +95,9 @@ class Observation:
         return self.reconstruction.inside(np.asarray(points_mm, float) - self.offset_mm)
 
 
-#: Margin (mm) around the resting bar whose pixels cannot be tissue (the bar's blur in the image).
+#: Margin (mm) around the resting bar whose pixels the sweep's segmentation may not enter (the
+#: bar's blur; the time series measures the blur instead, :func:`~hifumotion.speckle.segment_target`).
 BAR_MARGIN_MM = 0.5
-
-
-def known_solids(plane: Plane, setup: Setup, bar: bool = True) -> np.ndarray:
-    """Pixels of ``plane`` that cannot be the tissue: below the pool's floor (y < 0), and,
-    with ``bar``, inside the resting bar grown by :data:`BAR_MARGIN_MM`."""
-    pts = plane.points_mm()
-    out = pts[..., 1] < 0.0
-    b = setup.bar
-    if bar and b.enabled:
-        axis = np.asarray(b.direction, float)
-        d = pts - np.asarray(b.tip_at_rest_mm, float)
-        along = d @ axis
-        radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
-        out |= ((along <= BAR_MARGIN_MM) & (along >= -b.length_mm - BAR_MARGIN_MM)
-                & (radial <= b.radius_mm + BAR_MARGIN_MM))
-    return out
 
 
 def _plane_at(origin_mm: np.ndarray, observed: Observed, z_mm: float) -> Plane:
@@ -130,8 +123,16 @@ def read_user_contours(path: str | Path, observed: Observed) -> dict[int, np.nda
     return masks
 
 
+def frame_solids(observed: Observed):
+    """The known solids (:class:`~hifumotion.observed.solids.Solids`) on the time series' plane."""
+    from hifumotion.observed.solids import imaging_plane, known_solids
+
+    return known_solids(imaging_plane(observed.setup), observed.setup)
+
+
 def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
-            progress: Progress | None = None, boundary_offset_mm: float = 0.0) -> Observation:
+            progress: Progress | None = None, boundary_offset_mm: float = 0.0,
+            tracking: str = "speckle") -> Observation:
     """Segment, reconstruct and track an observed experiment (module docstring).
 
     ``boundary_offset_mm``: how far outside the true boundary the imaging system's
@@ -149,10 +150,17 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     px = observed.pixel_mm
     init = observed.initial_contour
 
+    from hifumotion.observed.solids import known_solids
+
+    if tracking not in ("speckle", "glcv"):
+        raise InputError(f"unknown tracking {tracking!r}; expected speckle or glcv", "tracking")
     t0 = time.perf_counter()
     start = int(np.argmin(np.abs(observed.sweep_z_mm - z_frames)))
     # what the operator knows cannot be tissue: the floor, and the bar where it rests
-    exclude = np.stack([known_solids(_plane_at(offset, observed, z), observed.setup) for z in observed.sweep_z_mm])
+    def solid(z):
+        return known_solids(_plane_at(offset, observed, z), observed.setup, BAR_MARGIN_MM).any
+
+    exclude = np.stack([solid(z) for z in observed.sweep_z_mm])
     sweep = segment_sweep(observed.sweep, init, start, method, spacing=px, exclude=exclude)
     tell("segment sweep", 1.0)
     timings["segment_sweep_s"] = time.perf_counter() - t0
@@ -175,17 +183,23 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     # the tracked ones where given
     # the floor, and the bar's place at rest: pushing along its axis it only moves away from
     # there, into the tissue, so no frame has tissue where the resting bar was
-    frame_plane = _plane_at(offset, observed, z_frames)
-    masks = track(observed.frames, init, method, spacing=px,
-                  exclude=known_solids(frame_plane, observed.setup)).masks
-    if boundary_offset_mm:
-        masks = np.stack([shift_boundary(m, boundary_offset_mm, px) for m in masks])
+    motion = None
+    if tracking == "speckle":
+        from hifumotion.speckle import follow
+
+        motion = follow(observed.frames.astype(np.float32) / 255.0, init, px, solids=frame_solids(observed),
+                        boundary_offset_mm=boundary_offset_mm, method=method)
+        masks = motion.masks.copy()
+    else:
+        masks = track(observed.frames, init, method, spacing=px, exclude=solid(z_frames)).masks
+        if boundary_offset_mm:
+            masks = np.stack([shift_boundary(m, boundary_offset_mm, px) for m in masks])
     for frame, m in given.items():
         masks[frame] = m
-    source = str(contours_csv) if given else method
+    source = str(contours_csv) if given else tracking
     tell("track frames", 1.0)
     timings["track_s"] = time.perf_counter() - t2
-    return Observation(observed, sweep, rec, offset, masks, source, timings)
+    return Observation(observed, sweep, rec, offset, masks, source, timings, motion)
 
 
-__all__ = ["Observation", "prepare", "read_user_contours"]
+__all__ = ["Observation", "frame_solids", "prepare", "read_user_contours"]

@@ -142,6 +142,39 @@ class EchoMap:
         return echo
 
 
+class PlaneInterpolant:
+    """The particles' in-plane displacement at fixed material points of one plane.
+
+    Shepard interpolation from the particles within 2Δx of the plane, weighted by the SPH
+    kernel of support 2Δx; a point beyond every support takes its nearest particle. The
+    same map moves the speckle (:class:`MovingSpeckle`) and gives the true displacement
+    a speckle tracker is scored against.
+    """
+
+    def __init__(self, rest_tissue_mm: np.ndarray, spacing_mm: float, points_tank_mm: np.ndarray, z_mm: float):
+        h = 2.0 * spacing_mm
+        self.near = np.flatnonzero(np.abs(rest_tissue_mm[:, 2] - z_mm) < h)
+        self.rest_near = rest_tissue_mm[self.near]
+        points = np.asarray(points_tank_mm, float).reshape(-1, 3)
+        self.count = len(points)
+        if len(self.near) and self.count:
+            k = int(min(16, len(self.near)))
+            dist, idx = cKDTree(self.rest_near).query(points, k=k)
+            dist = np.atleast_2d(dist.reshape(len(points), -1))
+            idx = np.atleast_2d(idx.reshape(len(points), -1))
+            w = kernel(dist, h)
+            w[w.sum(1) == 0, 0] = 1.0
+            self.weights = w / w.sum(1, keepdims=True)
+            self.neighbours = idx
+
+    def __call__(self, tissue_mm: np.ndarray) -> np.ndarray:
+        """In-plane displacement ``(N, 2)`` (mm; x, y of the tank) with the tissue at ``tissue_mm``."""
+        if not (len(self.near) and self.count):
+            return np.zeros((self.count, 2))
+        disp = tissue_mm[self.near] - self.rest_near
+        return (self.weights[:, :, None] * disp[self.neighbours]).sum(1)[:, :2]
+
+
 class MovingSpeckle:
     """The time series' scatterers, displaced with the tissue and the bar frame by frame."""
 
@@ -151,31 +184,14 @@ class MovingSpeckle:
         lab = echo.labels(scatterers.positions_mm)
         self.tissue_idx = np.flatnonzero(lab == 1)
         self.bar_idx = np.flatnonzero(lab == 2)
-        # Shepard interpolation of the particles' displacement, from the particles near
-        # the plane, weighted by the SPH kernel of support 2Δx
-        h = 2.0 * spacing_mm
-        z = echo.z
-        near = np.flatnonzero(np.abs(rest_tissue_mm[:, 2] - z) < h)
-        self.near = near
-        points = echo.probe.to_tank(scatterers.positions_mm[self.tissue_idx], z)
-        k = int(min(16, max(len(near), 1)))
-        dist, idx = cKDTree(rest_tissue_mm[near]).query(points, k=k) if len(near) else (None, None)
-        if len(near):
-            dist = np.atleast_2d(dist.reshape(len(points), -1))
-            idx = np.atleast_2d(idx.reshape(len(points), -1))
-            w = kernel(dist, h)
-            w[w.sum(1) == 0, 0] = 1.0   # a point beyond every support takes its nearest particle
-            self.weights = w / w.sum(1, keepdims=True)
-            self.neighbours = idx
-        self.rest_near = rest_tissue_mm[near]
+        points = echo.probe.to_tank(scatterers.positions_mm[self.tissue_idx], echo.z)
+        self.interpolant = PlaneInterpolant(rest_tissue_mm, spacing_mm, points, echo.z)
 
     def positions(self, tissue_mm: np.ndarray, bar_shift_mm: np.ndarray) -> np.ndarray:
         """Scatterer positions (lateral, depth mm) with the tissue at ``tissue_mm`` (all particles)."""
         pos = self.scatterers.positions_mm.copy()
-        if len(self.near) and len(self.tissue_idx):
-            disp = tissue_mm[self.near] - self.rest_near
-            moved = (self.weights[:, :, None] * disp[self.neighbours]).sum(1)
-            pos[self.tissue_idx] += moved[:, :2]   # plane axes: column = x, row = y
+        if len(self.tissue_idx):
+            pos[self.tissue_idx] += self.interpolant(tissue_mm)   # plane axes: column = x, row = y
         pos[self.bar_idx] += np.asarray(bar_shift_mm, float)[:2]
         return pos
 

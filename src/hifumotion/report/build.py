@@ -150,7 +150,7 @@ def _prediction_parts(outcome, truth: dict, folder: Path) -> list[str]:
                        "distance and centroid error (where the focus would be aimed) per frame.")]
     if outcome.truth_kind == "tracked contours":
         parts.append(paragraph("No independent truth was given: the scores compare the prediction with the "
-                               "GLCV-tracked contours, which include the tracking's own error.", "note"))
+                               "tracked contours, which include the tracking's own error.", "note"))
     frames = [r["frame"] for r in ev.table.rows]
     baseline_curves = {}
     for name, masks in ev.baseline_masks.items():
@@ -286,6 +286,28 @@ def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: 
     sections.append(("reconstruction", "Reconstructed tissue",
                      [figure(mesh_png.name, "The tissue reconstructed from the GLCV-segmented sweep"),
                       table(["", "value"], facts)]))
+    motion = outcome.calibration.observation.motion
+    if motion is not None:
+        from hifumotion.speckle.output import motion_figure
+
+        obs = outcome.calibration.observation.observed
+        png = motion_figure(obs.frames.astype(np.float32) / 255.0, motion, folder / "motion.png")
+        shift = np.linalg.norm(np.array([c.centroid_mm for c in motion.contours]) - motion.contours[0].centroid_mm, axis=1)
+        first = motion.first
+        rows = [["largest centroid shift of the tracked target (mm)", float(shift.max())],
+                ["speckle size, axial × lateral (px)", " × ".join(fmt(v, 3) for v in first.speckle_fwhm_px)],
+                ["bar blur, axial × lateral (px)", " × ".join(str(v) for v in first.bloom_px)],
+                ["speckle tracking (ms per frame)", 1000 * float(np.mean(motion.seconds_per_frame[1:]))]]
+        if motion.displacement.rigid_shift_mm is not None:
+            rows.append(["the bar's tracked push at the last frame (mm)",
+                         float(np.linalg.norm(motion.displacement.rigid_shift_mm[-1]))])
+        sections.append(("motion", "Observed motion (speckle tracking)",
+                         [paragraph("Frame 0 is segmented with the known solids taken out of the image; its "
+                                    "contour is then carried through the frames by the tissue's displacement, "
+                                    "measured from the speckle. Arrows: where each part of the tissue went by "
+                                    "the last frame; right: the axial strain that displacement implies."),
+                          figure(png.name, "Speckle-tracked displacement and strain"),
+                          table(["", "value"], rows)]))
     sections.append(("parameters", "Fitted parameters (Table 3)", _parameter_parts(outcome)))
     sections.append(("prediction", "Prediction (Table 4, Figure 4)", _prediction_parts(outcome, truth, folder)))
     sections.append(("baselines", "Against the baselines", _baseline_parts(outcome, folder)))

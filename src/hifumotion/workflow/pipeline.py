@@ -4,8 +4,8 @@
 and ``hifumotion run CONFIG.toml`` (on a user's files) share:
 
 1. **observe** (:func:`~hifumotion.estimation.prepare.prepare`): segment the sweep with
-   GLCV, reconstruct the tissue in 3D, track the time series from the clicked contour
-   (or take the user's training contours);
+   GLCV, reconstruct the tissue in 3D, track the time series from the clicked contour by
+   speckle tracking (or take the user's training contours);
 2. **calibrate** (:func:`~hifumotion.estimation.calibrate.calibrate`) on the training
    frames → ``calibration/`` (``parameters.json``, the model, the reconstruction);
 3. **predict** the training and validation frames with the fitted model, the online
@@ -49,6 +49,10 @@ class EstimationConfig(ConfigModel):
     particles: int = Field(paper.TISSUE_PARTICLES, ge=100, le=1_000_000, description="tissue particles of the fitted model (the paper: 4,399)")
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
+    objective: Literal["contour", "contour+displacement"] = Field(
+        "contour", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points")
+    tracking: Literal["speckle", "glcv"] = Field(
+        "speckle", description="how the time series is observed: frame 0's contour carried by speckle tracking, or GLCV re-segmenting every frame (the paper)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
     workers: int | None = Field(None, ge=1, description="Dask worker processes of the local cluster (default: the cores)")
@@ -101,11 +105,12 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
     if resume_log is not None:
         shutil.copyfile(resume_log, log)
     with stage("observe: segment sweep, reconstruct, track"):
-        observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm)
+        observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm,
+                              tracking=s.tracking)
     with stage("calibrate"):
         cal = calibrate(observation, CalibrationSettings(
             method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
-            model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations,
+            model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations, objective=s.objective,
             workers=s.workers, scheduler_address=s.scheduler_address), log_path=log, progress=tell)
     with stage("write the calibration"):
         cal.summary = save_calibration(cal, folder, observed_dir)

@@ -1,0 +1,115 @@
+"""``hifumotion track``: the target through a cine loop by speckle tracking."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from hifumotion.cli.app import app, parse_spacing, positive
+from hifumotion.console import console, log
+from hifumotion.errors import InputError
+
+
+def _solids_from_files(setup: Optional[Path], exclude: Optional[Path], bar: Optional[Path], shape):
+    """The known solids: from a setup.json (floor and resting bar on the imaging plane) and/or
+    mask PNGs (static exclusion, a rigid instrument)."""
+    from hifumotion.io import read_mask
+    from hifumotion.observed.solids import Solids
+
+    floor = np.zeros(shape, bool)
+    rigid = np.zeros(shape, bool)
+    if setup is not None:
+        from hifumotion.observed.setup import read_setup
+        from hifumotion.observed.solids import imaging_plane, known_solids
+
+        s = read_setup(setup)
+        if tuple(s.imaging.image_shape) != tuple(shape):
+            raise InputError(f"describes {tuple(s.imaging.image_shape)} images, the cine has {tuple(shape)}", setup)
+        known = known_solids(imaging_plane(s), s)
+        floor |= known.floor
+        rigid |= known.bar
+    for path, target in ((exclude, floor), (bar, rigid)):
+        if path is not None:
+            m = read_mask(path, binary=True)
+            if m.shape != tuple(shape):
+                raise InputError(f"mask shape {m.shape} differs from the cine's {tuple(shape)}", path)
+            target |= m
+    if not floor.any() and not rigid.any():
+        return None
+    return Solids(floor, rigid & ~floor)
+
+
+@app.command()
+def track(
+    source: Path = typer.Argument(..., help="Cine loop: DICOM/NIfTI/MHA/NRRD/video/PNG folder, or an observed/ folder (frames, initial_contour.csv, setup.json)."),
+    output: Path = typer.Option(..., "--output", "-o", help="New output folder."),
+    init: Optional[Path] = typer.Option(None, "--init", help="Frame 0's initial contour: init.json-style JSON, a mask PNG or a contour CSV (default: an observed folder's initial_contour.csv)."),
+    setup: Optional[Path] = typer.Option(None, "--setup", help="setup.json: where the pool's floor and the bar are (default: an observed folder's)."),
+    exclude: Optional[Path] = typer.Option(None, "--exclude", help="Mask PNG of static pixels that are not tissue (a floor, a membrane)."),
+    bar: Optional[Path] = typer.Option(None, "--bar", help="Mask PNG of a rigid instrument on frame 0 (its motion is tracked, never read as the tissue's)."),
+    boundary_offset: float = typer.Option(0.0, "--boundary-offset", min=-5.0, max=5.0, help="How far outside the true boundary your system's segmentations lie (mm, from a phantom); frame 0's free boundary moves inwards by it."),
+    method: str = typer.Option("glcv", "--method", "-m", help="Level set of frame 0's segmentation: gac, cv, lcv, rsf, mslcv or glcv."),
+    estimator: str = typer.Option("farneback", "--estimator", help="Optical flow: farneback (default), dis, ilk or tvl1."),
+    spacing: Optional[str] = typer.Option(None, "--spacing", help="Pixel size in mm: '0.2' or 'row,col'. Overrides the file."),
+    frame_interval: Optional[float] = typer.Option(None, "--frame-interval", callback=positive, help="Seconds between frames. Overrides the file."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
+) -> None:
+    """Follow the target's material through a cine: frame 0 segmented, its contour carried by speckle tracking."""
+    from hifumotion.cli.segment import load_init
+    from hifumotion.io import output_folder, read_sequence
+    from hifumotion.run_info import RunRecord
+    from hifumotion.segmentation import METHODS
+    from hifumotion.segmentation.levelset import check_init
+    from hifumotion.speckle import follow
+    from hifumotion.speckle._flow import ESTIMATORS
+    from hifumotion.speckle.displacement import displacement
+    from hifumotion.speckle.output import write_tracking
+
+    if method.lower() not in METHODS:
+        raise InputError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}", "--method")
+    if estimator.lower() not in ESTIMATORS:
+        raise InputError(f"unknown estimator {estimator!r}; expected one of {', '.join(ESTIMATORS)}", "--estimator")
+    cine = source
+    if source.is_dir() and (source / "setup.json").is_file():      # an observed/ folder
+        cine = source / "frames.nii.gz" if (source / "frames.nii.gz").is_file() else source / "frames"
+        setup = setup or source / "setup.json"
+        init = init or source / "initial_contour.csv"
+        if spacing is None or frame_interval is None:
+            from hifumotion.observed.setup import read_setup
+
+            s = read_setup(setup)
+            spacing = spacing or str(s.imaging.pixel_mm)
+            frame_interval = frame_interval or s.frame_interval_s
+    if init is None:
+        raise InputError("give frame 0's initial contour with --init (or track an observed/ folder)", "--init")
+    seq = read_sequence(cine, parse_spacing(spacing), frame_interval)
+    if seq.n_frames < 2:
+        raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
+    start = load_init(init, cine, None, None, seq.shape)
+    check_init(start, seq.shape, str(init))
+    solids = _solids_from_files(setup, exclude, bar, seq.shape)
+    record = RunRecord("track", config={"source": str(source), "init": str(init), "setup": None if setup is None else str(setup),
+                                        "exclude": None if exclude is None else str(exclude),
+                                        "bar": None if bar is None else str(bar), "method": method,
+                                        "estimator": estimator, "boundary_offset_mm": boundary_offset,
+                                        "spacing_mm": list(seq.spacing_mm), "frame_interval_s": seq.frame_interval_s})
+    with output_folder(output, overwrite, inputs=(source, init, setup, exclude, bar)) as out:
+        with record.stage("speckle tracking"):
+            series = displacement(seq.frames, seq.spacing_mm, exclude=None if solids is None else solids.floor,
+                                  rigid=None if solids is None else solids.bar, estimator=estimator, progress=True)
+        with record.stage("contours"):
+            result = follow(seq.frames, start, seq.spacing_mm, solids=solids, boundary_offset_mm=boundary_offset,
+                            method=method, series=series)
+        with record.stage("write"):
+            summary = write_tracking(out, seq.frames, result, seq.frame_interval_s,
+                                     {"source": str(source), "method": method})
+        record.extra["frames"] = seq.n_frames
+        record.extra["ms_per_frame_mean"] = summary["ms_per_frame_mean"]
+        record.write(out)
+    shift = summary["centroid_shift_mm"]
+    log.info("speckle tracking: %d frames, %.1f ms per frame", seq.n_frames, summary["ms_per_frame_mean"] or 0.0)
+    console.print(f"tracked {seq.n_frames} frames: the target's centroid moved up to {max(shift):.2f} mm; "
+                  f"results in {output.resolve()}", highlight=False)

@@ -1,0 +1,115 @@
+"""What in an image cannot be the tissue: the pool's floor and the bar, and how far their echoes blur.
+
+The setup (``setup.json``) says where the floor and the resting bar are; the image says
+how far a solid's bright echo spreads beyond its surface (its *bloom*: the
+point-spread function's tails, shown by the log compression). A segmentation or a
+speckle tracker that reads the bloom as tissue puts the target's boundary on the bar,
+so the bloom is measured on the image (:func:`measure_bloom_px`) rather than assumed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hifumotion.observed.setup import Setup
+from hifumotion.particles.section import Plane
+
+
+@dataclass(frozen=True)
+class Solids:
+    """Frame-0 pixels of the known solids, bool ``(H, W)`` each.
+
+    ``floor``: below the pool's floor (static); ``bar``: inside the resting bar (moves
+    rigidly with the push).
+    """
+
+    floor: np.ndarray
+    bar: np.ndarray
+
+    @property
+    def any(self) -> np.ndarray:
+        return self.floor | self.bar
+
+
+def imaging_plane(setup: Setup, z_mm: float | None = None) -> Plane:
+    """The image plane at ``z_mm`` (default: the time series'), in the pool frame, from the setup."""
+    im = setup.imaging
+    x0, y0 = im.row0_col0_mm
+    z = im.frames_plane_z_mm if z_mm is None else z_mm
+    return Plane((float(x0), float(y0), float(z)), im.column_axis, im.row_axis, tuple(im.image_shape), im.pixel_mm)
+
+
+def known_solids(plane: Plane, setup: Setup, bar_margin_mm: float = 0.0) -> Solids:
+    """The pixels of ``plane`` below the pool's floor (y < 0) and inside the resting bar,
+    grown by ``bar_margin_mm`` along its axis and radius."""
+    pts = plane.points_mm()
+    floor = pts[..., 1] < 0.0
+    bar = np.zeros(floor.shape, bool)
+    b = setup.bar
+    if b.enabled:
+        axis = np.asarray(b.direction, float)
+        axis = axis / np.linalg.norm(axis)
+        d = pts - np.asarray(b.tip_at_rest_mm, float)
+        along = d @ axis
+        radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
+        m = float(bar_margin_mm)
+        bar = (along <= m) & (along >= -b.length_mm - m) & (radial <= b.radius_mm + m)
+    return Solids(floor, bar & ~floor)
+
+
+def measure_bloom_px(image: np.ndarray, solid: np.ndarray, level: float, speckle_fwhm_px: tuple[float, float],
+                     limit_px: int = 40) -> tuple[int, int]:
+    """How far (px, ``(rows, cols)``) a solid's echo stays brighter than ``level`` beyond its surface.
+
+    Read on the image beside the solid, along the columns: for every distance ``d`` the
+    mean grey level of the pixels ``d`` columns outside the solid's left and right edges
+    (rows the solid occupies, pixels not in the solid); the bloom ends at the first ``d``
+    where that mean is at or below ``level`` (where a segmentation would call it
+    background). Beside a bar in water nothing but the bloom is bright, whereas its
+    pushing face may touch the tissue; the depth-wise bloom is the lateral one scaled by
+    the point-spread function's aspect, the speckle's FWHM ``(rows, cols)``
+    (:func:`hifumotion.speckle.speckle_fwhm_px`). ``(0, 0)`` for an empty solid.
+    """
+    img = np.asarray(image, np.float32)
+    solid = np.asarray(solid, bool)
+    rows = np.flatnonzero(solid.any(1))
+    if rows.size == 0:
+        return (0, 0)
+    s = solid[rows]
+    a = img[rows]
+    n = s.shape[1]
+    first = s.argmax(1)
+    last = n - 1 - s[:, ::-1].argmax(1)
+    lateral = limit_px
+    for d in range(1, limit_px + 1):
+        vals = []
+        for edge in (first - d, last + d):
+            ok = (edge >= 0) & (edge < n)
+            ok[ok] &= ~s[np.flatnonzero(ok), edge[ok]]
+            if ok.any():
+                vals.append(a[np.flatnonzero(ok), edge[ok]])
+        if not vals:
+            lateral = d - 1
+            break
+        if float(np.concatenate(vals).mean()) <= level:
+            lateral = d - 1
+            break
+    fr, fc = speckle_fwhm_px
+    axial = int(np.ceil(lateral * fr / max(fc, 1e-6))) if lateral else 0
+    return (axial, int(lateral))
+
+
+def bloom_mask(solid: np.ndarray, bloom_px: tuple[int, int]) -> np.ndarray:
+    """``solid`` grown by its bloom: an ellipse of semi-axes ``bloom_px`` (rows, cols)."""
+    import cv2
+
+    ry, rx = (max(int(v), 0) for v in bloom_px)
+    if ry == 0 and rx == 0:
+        return np.asarray(solid, bool)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rx + 1, 2 * ry + 1))
+    return cv2.dilate(np.asarray(solid, np.uint8), kernel).astype(bool)
+
+
+__all__ = ["Solids", "imaging_plane", "known_solids", "measure_bloom_px", "bloom_mask"]

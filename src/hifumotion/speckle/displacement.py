@@ -1,0 +1,370 @@
+"""Displacement of the imaging plane's material points, from frame 0 to every frame, by speckle tracking.
+
+The speckle of a B-mode image is made by the tissue's scatterers, so it moves with
+the tissue: an optical-flow estimator that follows it measures the displacement of
+material points, the paper's D_t (Section 2.2.2), at every pixel rather than only
+at the boundary a segmentation sees.
+
+The field is Lagrangian: ``u_t(X)`` (mm) is where the material at pixel ``X`` of
+frame 0 has gone by frame ``t`` (``x = X + u_t(X)``). It is built in two moves per
+frame, so frame-to-frame errors do not accumulate (drift control):
+
+1. **predict** by composition with the frame-to-frame flow ``f`` from ``t−1`` to
+   ``t``: ``u_t(X) = u_{t−1}(X) + f(X + u_{t−1}(X))``;
+2. **correct** by direct registration to frame 0: frame ``t`` pulled back through the
+   prediction, ``W(X) = I_t(X + u_t(X))``, is registered to ``I_0``; its residual
+   shift ``d`` (small) updates ``u_t(X) ← d(X) + u_t(X + d(X))``.
+
+The correction only helps while frame ``t`` still correlates with frame 0; where
+the speckle has decorrelated (large strain, out-of-plane motion) it is skipped
+pixel by pixel: each pixel keeps whichever of the predicted and corrected estimate
+matches frame 0 better (the local normalised cross-correlation, the *quality*).
+
+Pixels known not to be tissue (the pool's floor, the bar: ``exclude``) carry no
+displacement (NaN) and quality 0.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hifumotion.errors import InputError
+from hifumotion.sequence import as_spacing_mm
+from hifumotion.speckle._flow import estimator as flow_estimator
+
+#: Side of the window (px) of the local normalised cross-correlation that grades each pixel.
+QUALITY_WINDOW_PX = 9
+
+
+def _remap(field: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
+    """``field`` (H, W[, C]) sampled bilinearly at ``(map_x, map_y)`` px; edges replicated."""
+    import cv2
+
+    return cv2.remap(np.ascontiguousarray(field, np.float32), map_x, map_y, cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+
+
+def local_ncc(a: np.ndarray, b: np.ndarray, window_px: int = QUALITY_WINDOW_PX) -> np.ndarray:
+    """Normalised cross-correlation of ``a`` and ``b`` in a ``window_px`` box around each pixel, in [−1, 1]."""
+    import cv2
+
+    a = np.asarray(a, np.float32)
+    b = np.asarray(b, np.float32)
+    k = (int(window_px), int(window_px))
+
+    def mean(x):
+        return cv2.boxFilter(x, -1, k, borderType=cv2.BORDER_REFLECT)
+
+    ma, mb = mean(a), mean(b)
+    cov = mean(a * b) - ma * mb
+    va = np.maximum(mean(a * a) - ma * ma, 0.0)
+    vb = np.maximum(mean(b * b) - mb * mb, 0.0)
+    return (cov / np.sqrt(va * vb + 1e-12)).astype(np.float32)
+
+
+def unit_frames(frames) -> np.ndarray:
+    """``(T, H, W)`` frames as float32 in [0, 1]: floats already there are kept, anything else
+    is scaled as :func:`~hifumotion.sequence.scale_intensities` does (uint8: 0–255)."""
+    from hifumotion.sequence import scale_intensities
+
+    arr = np.asarray(frames)
+    if arr.ndim != 3 or arr.shape[0] < 1 or min(arr.shape[1:]) < 8:
+        raise InputError(f"expected frames (T, H, W) of at least 8 × 8 px, got shape {arr.shape}", "frames")
+    if not np.issubdtype(arr.dtype, np.number) and arr.dtype != np.bool_:
+        raise InputError(f"expected numeric pixel values, got {arr.dtype}", "frames")
+    if np.issubdtype(arr.dtype, np.floating):
+        if not np.all(np.isfinite(arr)):
+            raise InputError("frames contain NaN or infinite values", "frames")
+        if arr.min() >= 0.0 and arr.max() <= 1.0:
+            return arr.astype(np.float32, copy=False)
+    return scale_intensities(arr)
+
+
+@dataclass
+class DisplacementSeries:
+    """The Lagrangian displacement of frame 0's pixels at every frame.
+
+    Attributes
+    ----------
+    displacement_mm
+        float32 ``(T, H, W, 2)``: ``(x, y)`` = (column, row) components in mm of where the
+        material at each frame-0 pixel has moved by frame ``t``; frame 0 is zero; NaN on
+        excluded pixels.
+    quality
+        float32 ``(T, H, W)``: local normalised cross-correlation (window
+        :data:`QUALITY_WINDOW_PX`) of frame 0 with frame ``t`` pulled back through the
+        displacement; 1 = the speckle matches, ≤ 0 = no information; 0 on excluded pixels.
+    spacing_mm
+        Pixel size ``(row, col)`` in mm.
+    estimator
+        Name of the optical-flow estimator.
+    seconds_per_frame
+        Wall time of each frame's estimate (s); frame 0 is 0.
+    rigid_shift_mm
+        ``(T, 2)`` the rigid solid's tracked translation (x, y) from frame 0 in mm (the bar's
+        push as the image shows it); ``None`` without one.
+    """
+
+    displacement_mm: np.ndarray
+    quality: np.ndarray
+    spacing_mm: tuple[float, float]
+    estimator: str = "dis"
+    seconds_per_frame: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rigid_shift_mm: np.ndarray | None = None
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.displacement_mm.shape[0])
+
+    def displacement_px(self, frame: int) -> np.ndarray:
+        """Frame ``frame``'s field in px, ``(H, W, 2)`` (NaN where excluded)."""
+        row, col = self.spacing_mm
+        return self.displacement_mm[frame] / np.array([col, row], np.float32)
+
+    def at(self, points_px: np.ndarray, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        """Displacement (mm, ``(N, 2)``) and quality ``(N,)`` of frame-0 material points
+        ``points_px`` (``(N, 2)`` px, (x, y)) at ``frame``: bilinear, from the valid pixels
+        nearest each point (a point on an excluded pixel takes its valid neighbours')."""
+        pts = np.asarray(points_px, np.float32).reshape(-1, 2)
+        u = np.nan_to_num(self.displacement_mm[frame], nan=0.0)
+        valid = np.isfinite(self.displacement_mm[frame, ..., 0]).astype(np.float32)
+        mx, my = pts[:, 0].reshape(1, -1), pts[:, 1].reshape(1, -1)
+        w = _remap(valid, mx, my).ravel()
+        du = _remap(u * valid[..., None], mx, my).reshape(-1, 2)
+        q = _remap(self.quality[frame] * valid, mx, my).ravel()
+        safe = np.maximum(w, 1e-6)[:, None]
+        disp = np.where(w[:, None] > 1e-6, du / safe, np.nan)
+        return disp.astype(np.float32), np.where(w > 1e-6, q / safe[:, 0], 0.0).astype(np.float32)
+
+    def strain(self, frame: int) -> np.ndarray:
+        """Small-strain tensor components ``(H, W, 3)`` = (ε_xx, ε_yy, ε_xy) of frame ``frame``
+        (dimensionless, central differences of the field in mm over the pixel size)."""
+        row, col = self.spacing_mm
+        u = self.displacement_mm[frame]
+        dux_dy, dux_dx = np.gradient(u[..., 0], row, col)
+        duy_dy, duy_dx = np.gradient(u[..., 1], row, col)
+        return np.dstack([dux_dx, duy_dy, 0.5 * (dux_dy + duy_dx)]).astype(np.float32)
+
+
+#: Start a new reference frame (keyframe) when the median quality of the tissue falls below this.
+KEYFRAME_QUALITY = 0.6
+
+
+def _shifted(mask: np.ndarray, shift_px: np.ndarray) -> np.ndarray:
+    """``mask`` translated by ``shift_px`` (x, y) px (nearest pixel)."""
+    import cv2
+
+    h, w = mask.shape
+    m = np.float32([[1, 0, shift_px[0]], [0, 1, shift_px[1]]])
+    return cv2.warpAffine(mask.astype(np.uint8), m, (w, h), flags=cv2.INTER_NEAREST, borderValue=0).astype(bool)
+
+
+def _grow(mask: np.ndarray, element: np.ndarray | None) -> np.ndarray:
+    import cv2
+
+    return mask if element is None else cv2.dilate(mask.astype(np.uint8), element).astype(bool)
+
+
+class RigidTracker:
+    """The translation of a rigid solid (the bar) from frame 0, by template matching.
+
+    The solid's frame-0 appearance (its bounding box grown by ``margin_px``) is searched for
+    in each frame around where it was last seen, moved on at its last velocity; the peak
+    of the normalised cross-correlation is refined to sub-pixel by a parabola on each axis.
+    """
+
+    def __init__(self, frame0: np.ndarray, solid: np.ndarray, margin_px: int = 4):
+        rows, cols = np.nonzero(solid)
+        h, w = solid.shape
+        self.r0, self.r1 = max(rows.min() - margin_px, 0), min(rows.max() + 1 + margin_px, h)
+        self.c0, self.c1 = max(cols.min() - margin_px, 0), min(cols.max() + 1 + margin_px, w)
+        self.template = np.ascontiguousarray(frame0[self.r0:self.r1, self.c0:self.c1], np.float32)
+        self.shift = np.zeros(2, np.float32)
+        self.velocity = np.zeros(2, np.float32)
+
+    def update(self, frame: np.ndarray) -> np.ndarray:
+        """The translation (x, y) px of the solid in ``frame`` from frame 0."""
+        import cv2
+
+        h, w = frame.shape
+        guess = self.shift + self.velocity
+        reach = int(np.ceil(4 + 2 * np.abs(self.velocity).max()))
+        gx, gy = int(round(guess[0])), int(round(guess[1]))
+        # the search window, clipped to the image
+        r0, r1 = max(self.r0 + gy - reach, 0), min(self.r1 + gy + reach, h)
+        c0, c1 = max(self.c0 + gx - reach, 0), min(self.c1 + gx + reach, w)
+        th, tw = self.template.shape
+        if r1 - r0 < th or c1 - c0 < tw:   # the solid has (nearly) left the image: keep it moving
+            found = guess
+        else:
+            score = cv2.matchTemplate(np.ascontiguousarray(frame[r0:r1, c0:c1], np.float32), self.template,
+                                      cv2.TM_CCOEFF_NORMED)
+            _, _, _, (px, py) = cv2.minMaxLoc(score)
+
+            def peak(a, b, c):
+                den = a - 2 * b + c
+                return 0.0 if abs(den) < 1e-12 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+            sx = peak(score[py, px - 1], score[py, px], score[py, px + 1]) if 0 < px < score.shape[1] - 1 else 0.0
+            sy = peak(score[py - 1, px], score[py, px], score[py + 1, px]) if 0 < py < score.shape[0] - 1 else 0.0
+            found = np.array([c0 + px + sx - self.c0, r0 + py + sy - self.r0], np.float32)
+        self.velocity = found - self.shift
+        self.shift = found
+        return found
+
+
+def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | None = None,
+                 rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
+                 keyframe_quality: float = KEYFRAME_QUALITY, progress: bool = False) -> DisplacementSeries:
+    """Track the speckle of a cine loop: the displacement of frame 0's material points at every frame.
+
+    Each frame is registered directly to the current reference frame (frame 0, or the
+    last keyframe), starting from the previous frame's estimate, so the error does not grow
+    with the number of frames (no frame-to-frame drift). When the tissue's speckle has
+    decorrelated from the reference (median quality below ``keyframe_quality``), the current
+    frame becomes the new reference and the maps are composed.
+
+    Solids are known: ``exclude`` (static, such as the pool's floor) and ``rigid`` (one that
+    moves by translation, such as the pushing bar, tracked on its own echo by
+    :class:`RigidTracker`). Both, grown by their measured bloom
+    (:func:`~hifumotion.observed.solids.measure_bloom_px`), are set to the background grey
+    level in both images before the flow is computed, so the estimator's window never
+    mixes a solid's motion into the tissue's; tissue a solid covers in the current frame is
+    *occluded* and, like every weakly textured pixel, takes the displacement of the visible
+    tissue around it (quality-weighted normalised convolution at the speckle's scale).
+
+    Parameters
+    ----------
+    frames
+        ``(T, H, W)`` grey levels in [0, 1], or an :class:`~hifumotion.sequence.ImageSequence`
+        (its spacing is used when ``spacing_mm`` is not given).
+    spacing_mm
+        Pixel size in mm, scalar or ``(row, col)``.
+    exclude, rigid
+        ``(H, W)`` bool frame-0 masks of the static solids and of the rigidly moving one;
+        both carry NaN displacement and quality 0 in the result.
+    estimator
+        The optical flow (:data:`hifumotion.speckle._flow.ESTIMATORS`); ``farneback`` by
+        default (docs/decisions.md, "Speckle tracking").
+    smoothing
+        Width of the quality-weighted smoothing in speckle sizes (σ = ``smoothing`` × the
+        speckle's FWHM / 2.355 on each axis); 0 for none (occluded pixels are then left as
+        the flow gave them).
+    keyframe_quality
+        The median quality below which a new reference frame is started (0: never).
+    progress
+        Show a progress bar.
+
+    Returns
+    -------
+    DisplacementSeries
+
+    References
+    ----------
+    Farnebäck G. Two-frame motion estimation based on polynomial expansion. SCIA 2003. —
+    Lubinski MA, Emelianov SY, O'Donnell M. Speckle tracking methods for ultrasonic
+    elasticity imaging using short-time correlation. IEEE TUFFC 46(1), 1999. — Knutsson H,
+    Westin C-F. Normalized and differential convolution. CVPR 1993.
+    """
+    import cv2
+
+    from hifumotion.observed.solids import measure_bloom_px
+    from hifumotion.sequence import ImageSequence
+    from hifumotion.speckle._fill import normalized_convolution
+    from hifumotion.speckle._speckle_size import speckle_fwhm_px
+
+    if isinstance(frames, ImageSequence):
+        spacing_mm = spacing_mm if spacing_mm is not None else frames.spacing_mm
+        frames = frames.frames
+    frames = unit_frames(frames)
+    spacing = as_spacing_mm(spacing_mm)
+    t_count, h, w = frames.shape
+    given = {}
+    for name, m in (("exclude", exclude), ("rigid", rigid)):
+        if m is not None:
+            m = np.asarray(m, bool)
+            if m.shape != (h, w):
+                raise InputError(f"expected a mask of shape {(h, w)}, got {m.shape}", name)
+            given[name] = m if m.any() else None
+    exclude, rigid = given.get("exclude"), given.get("rigid")
+    static = exclude if exclude is not None else np.zeros((h, w), bool)
+    solid0 = static | (rigid if rigid is not None else False)
+    flow = flow_estimator(estimator)
+    # the speckle's size and the grey levels, measured on frame 0 away from the solids
+    bright = (frames[0] > np.percentile(frames[0][~solid0], 50)) & ~solid0
+    fwhm = speckle_fwhm_px(frames[0], bright if bright.sum() > 64 else None)
+    sigma = (smoothing * fwhm[0] / 2.355, smoothing * fwhm[1] / 2.355)
+    tissue_level = float(np.median(frames[0][bright])) if bright.any() else 1.0
+    background = float(np.median(frames[0][~bright & ~solid0])) if (~bright & ~solid0).any() else 0.0
+    element = None
+    if rigid is not None:
+        bloom = measure_bloom_px(frames[0], rigid, 0.5 * (tissue_level + background), fwhm)
+        if max(bloom) > 0:
+            element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * bloom[1] + 1, 2 * bloom[0] + 1))
+    tracker = RigidTracker(frames[0], rigid) if rigid is not None else None
+
+    def solids_at(shift: np.ndarray) -> np.ndarray:
+        return _grow(static | (_shifted(rigid, shift) if rigid is not None else False), element)
+
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    out = np.zeros((t_count, h, w, 2), np.float32)
+    quality = np.zeros((t_count, h, w), np.float32)
+    quality[0] = np.where(solid0, 0.0, 1.0)
+    seconds = np.zeros(t_count)
+    rigid_path = np.zeros((t_count, 2), np.float32)
+    key = 0                                    # the reference frame
+    covered_key = solids_at(np.zeros(2))       # the solids (and their bloom) in the reference
+    reference = frames[0]
+    u_key = np.zeros((h, w, 2), np.float32)    # frame 0 → reference (frame-0 grid)
+    v = np.zeros((h, w, 2), np.float32)        # reference → current (reference grid)
+    textured = None                            # frame-0 pixels with speckle to track (set at frame 1)
+    steps = range(1, t_count)
+    if progress:
+        from hifumotion.console import track as progress_bar
+
+        steps = progress_bar(steps, "speckle tracking", total=t_count - 1)
+    for t in steps:
+        t0 = time.perf_counter()
+        shift = tracker.update(frames[t]) if tracker is not None else np.zeros(2, np.float32)
+        covered = solids_at(shift)
+        current = frames[t]
+        if covered.any() or covered_key.any():
+            # where a solid is (now, or was in the reference) frame t shows the reference moved
+            # by the estimate so far: those pixels agree with it, and no solid's motion reaches
+            # the tissue through the estimator's window
+            back_x, back_y = gx - v[..., 0], gy - v[..., 1]
+            replace = covered | (_remap(covered_key.astype(np.float32), back_x, back_y) > 0.5)
+            current = np.where(replace, _remap(reference, back_x, back_y), current)
+        # register frame t directly to the reference, starting from the previous estimate
+        v = flow(reference, current, v)
+        q = local_ncc(reference, _remap(frames[t], gx + v[..., 0], gy + v[..., 1]))
+        weight = np.clip(q, 0.0, 1.0) ** 2
+        if covered.any() or covered_key.any():
+            hidden = _remap(covered.astype(np.float32), gx + v[..., 0], gy + v[..., 1]) > 0.5
+            weight[hidden | covered_key] = 0.0
+        if smoothing > 0:
+            v = normalized_convolution(v, weight, sigma)
+        # back on frame 0's grid
+        mx, my = gx + u_key[..., 0], gy + u_key[..., 1]
+        out[t] = u_key + _remap(v, mx, my)
+        quality[t] = np.sqrt(np.clip(_remap(weight, mx, my), 0.0, 1.0))
+        rigid_path[t] = shift
+        seconds[t] = time.perf_counter() - t0
+        if textured is None:
+            textured = (quality[t] > 0.5) & ~solid0
+        if (keyframe_quality > 0 and t < t_count - 1 and textured.any()
+                and np.median(quality[t][textured]) < keyframe_quality):
+            key, u_key, v = t, out[t].copy(), np.zeros((h, w, 2), np.float32)
+            covered_key, reference = covered, frames[t]
+    row, col = spacing
+    out *= np.array([col, row], np.float32)
+    out[:, solid0] = np.nan
+    quality[:, solid0] = 0.0
+    return DisplacementSeries(out, quality, spacing, estimator.lower(), seconds,
+                              rigid_path * np.array([col, row], np.float32) if rigid is not None else None)
+
+
+__all__ = ["DisplacementSeries", "displacement", "local_ncc", "QUALITY_WINDOW_PX", "KEYFRAME_QUALITY", "RigidTracker"]

@@ -1,0 +1,197 @@
+"""Contours that follow the material: frame 0's contour carried by the speckle's displacement.
+
+Re-segmenting every frame sees only the boundary, and only as well as the bar's blur
+and the speckle let it: a bright bar read as tissue drags the contour with it. Here the
+target is segmented once, on frame 0 (GLCV from the clinician's contour, the known
+solids excluded), and every later contour is the same material boundary moved by the
+tissue's measured displacement (:func:`~hifumotion.speckle.displacement`): the points
+``A`` of the paper's Eq. 20 carried by ``D_t``. Optionally a few level-set iterations in
+a narrow band around the carried contour then let the image correct it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hifumotion.contour import Contour
+from hifumotion.errors import InputError
+from hifumotion.observed.solids import Solids
+from hifumotion.speckle.displacement import DisplacementSeries, displacement as track_speckle, unit_frames
+
+
+@dataclass
+class FollowResult:
+    """Every frame's target, carried from frame 0.
+
+    Attributes
+    ----------
+    masks
+        bool ``(T, H, W)``.
+    contours
+        The contour of each frame (px and mm); frame ``t``'s points are frame 0's points
+        moved by the displacement, so point ``i`` is the same material point in every frame.
+    displacement
+        The speckle-tracked displacement the contours were carried by.
+    quality
+        ``(T, N)`` the displacement's quality at each contour point (1 = the speckle
+        matches frame 0; 0 = occluded, filled from its neighbours).
+    seconds_per_frame
+        Wall time of each frame (speckle tracking + carrying), s.
+    first
+        Frame 0's segmentation (:func:`segment_target`).
+    """
+
+    masks: np.ndarray
+    contours: list[Contour]
+    displacement: DisplacementSeries
+    quality: np.ndarray
+    seconds_per_frame: np.ndarray
+    first: "TargetSegmentation | None" = None
+
+    @property
+    def points_px(self) -> np.ndarray:
+        """``(T, N, 2)`` the contour's material points in every frame (px, (x, y))."""
+        return np.stack([c.points_px for c in self.contours])
+
+
+def carry_contour(contour_px: np.ndarray, series: DisplacementSeries, frame: int) -> tuple[np.ndarray, np.ndarray]:
+    """Frame-0 contour points ``(N, 2)`` px moved to ``frame``: their positions (px) and quality."""
+    disp_mm, quality = series.at(contour_px, frame)
+    row, col = series.spacing_mm
+    moved = np.asarray(contour_px, np.float64) + np.nan_to_num(disp_mm, nan=0.0) / np.array([col, row])
+    return moved, quality
+
+
+@dataclass
+class TargetSegmentation:
+    """Frame 0's target as :func:`segment_target` found it.
+
+    ``mask``: the target; ``excluded``: the pixels masked out of the image before the level
+    set ran (the solids and the bar's bloom); ``bloom_px``: the bar's measured bloom
+    ``(rows, cols)``; ``speckle_fwhm_px``: the speckle's size ``(rows, cols)``.
+    """
+
+    mask: np.ndarray
+    excluded: np.ndarray
+    bloom_px: tuple[int, int]
+    speckle_fwhm_px: tuple[float, float]
+
+
+def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Solids | None = None,
+                   boundary_offset_mm: float = 0.0, method: str = "glcv", **params: Any) -> TargetSegmentation:
+    """Segment the target on one frame with the known solids taken out of the image.
+
+    1. The tissue's and the background's grey levels are read inside and well outside the
+       initial contour; the bar's bloom is measured on the image
+       (:func:`~hifumotion.observed.solids.measure_bloom_px`, with the speckle's size from
+       :func:`~hifumotion.speckle.speckle_fwhm_px`).
+    2. The solids (floor, bar + bloom) are set to the background level *before* the level set
+       runs, so it cannot bridge the water gap to a bright bar (cutting them out afterwards
+       leaves the bridge).
+    3. The segmentation, less the solids, is moved inwards by ``boundary_offset_mm`` (the
+       imaging system's, measured on a phantom) on its free boundary only: where it lies on a
+       solid it is already where the solid's surface is.
+    """
+    from scipy import ndimage
+
+    from hifumotion.observed import shift_boundary
+    from hifumotion.observed.solids import bloom_mask, measure_bloom_px
+    from hifumotion.segmentation import _resolve_init, segment
+    from hifumotion.segmentation.levelset import initial_phi
+    from hifumotion.sequence import as_spacing_mm
+    from hifumotion.speckle._speckle_size import speckle_fwhm_px
+
+    img = np.asarray(image, np.float32)
+    init = _resolve_init(init, None)
+    start = initial_phi(init, img.shape) > 0
+    solid = solids.any if solids is not None else np.zeros(img.shape, bool)
+    inside = start & ~solid
+    if inside.sum() < 16:
+        raise InputError("the initial contour holds fewer than 16 pixels off the known solids", "init")
+    outside = ~ndimage.binary_dilation(start | solid, iterations=10)
+    tissue = float(np.median(img[inside]))
+    background = float(np.median(img[outside])) if outside.any() else float(img.min())
+    fwhm = speckle_fwhm_px(img, inside if inside.sum() > 64 else None)
+    excluded = solid.copy()
+    bloom = (0, 0)
+    if solids is not None and solids.bar.any():
+        bloom = measure_bloom_px(img, solids.bar, 0.5 * (tissue + background), fwhm)
+        excluded |= bloom_mask(solids.bar, bloom)
+    masked = np.where(excluded, np.float32(background), img)
+    mask = segment(masked, init, method, spacing_mm, **params).mask & ~excluded
+    if boundary_offset_mm:
+        pixel = float(np.mean(as_spacing_mm(spacing_mm)))
+        mask = shift_boundary(mask | excluded, boundary_offset_mm, pixel) & ~excluded
+    if not mask.any():
+        raise InputError("the target's segmentation is empty once the known solids are removed; "
+                         "check the initial contour", "init")
+    return TargetSegmentation(mask, excluded, bloom, fwhm)
+
+
+def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = None,
+           boundary_offset_mm: float = 0.0, method: str = "glcv", series: DisplacementSeries | None = None,
+           point_step_px: float = 1.0, progress: bool = False, **params: Any) -> FollowResult:
+    """Segment frame 0 and carry its contour through the cine loop by speckle tracking.
+
+    Parameters
+    ----------
+    frames
+        ``(T, H, W)`` in [0, 1] or an :class:`~hifumotion.sequence.ImageSequence`.
+    init
+        Frame 0's initial contour (anything :func:`~hifumotion.segmentation.segment` takes).
+    spacing_mm
+        Pixel size (mm), scalar or ``(row, col)``.
+    solids
+        The known solids on frame 0 (:func:`~hifumotion.observed.solids.known_solids`): the
+        floor (static) and the bar (moving rigidly); neither can be target, and neither's
+        motion is read as the tissue's.
+    boundary_offset_mm
+        How far outside the true boundary the imaging system's segmentations lie (mm,
+        measured on a phantom); frame 0's free boundary is moved inwards by it.
+    method, params
+        The level set of frame 0's segmentation and its parameters.
+    series
+        A displacement already computed for these frames (else
+        :func:`~hifumotion.speckle.displacement` runs).
+    point_step_px
+        Spacing of the carried material points along frame 0's contour (px).
+    progress
+        Show a progress bar.
+    """
+    from hifumotion.sequence import ImageSequence
+
+    if isinstance(frames, ImageSequence):
+        spacing_mm = spacing_mm if spacing_mm is not None else frames.spacing_mm
+        frames = frames.frames
+    frames = unit_frames(frames)
+    shape = frames.shape[1:]
+    t0 = time.perf_counter()
+    first = segment_target(frames[0], init, spacing_mm, solids=solids, boundary_offset_mm=boundary_offset_mm,
+                           method=method, **params)
+    contour0 = Contour.from_mask(first.mask, spacing_mm)
+    points0 = contour0.resampled(point_step_px).points_px
+    first_s = time.perf_counter() - t0
+    if series is None:
+        series = track_speckle(frames, spacing_mm, exclude=None if solids is None else solids.floor,
+                               rigid=None if solids is None else solids.bar, progress=progress)
+    contours, masks, quality = [], [], []
+    seconds = np.array(series.seconds_per_frame, float)
+    seconds[0] += first_s
+    for t in range(frames.shape[0]):
+        t1 = time.perf_counter()
+        pts, q = carry_contour(points0, series, t) if t else (points0, np.ones(len(points0), np.float32))
+        c = Contour(pts, contour0.spacing_mm)
+        contours.append(c)
+        # the material as the image shows it: not clipped at the solids (a penalty contact in
+        # a simulation, or a compliant membrane, lets tissue past where the solid was)
+        masks.append(c.to_mask(shape) if t else first.mask)
+        quality.append(q)
+        seconds[t] += time.perf_counter() - t1
+    return FollowResult(np.stack(masks), contours, series, np.stack(quality), seconds, first)
+
+
+__all__ = ["FollowResult", "TargetSegmentation", "follow", "carry_contour", "segment_target"]

@@ -1,0 +1,157 @@
+"""A tracking's files: what ``hifumotion track`` writes, and the calibration keeps of it.
+
+Layout (lengths in mm, times in s)::
+
+    masks/frame_NNNN.png        the target in every frame (0/255)
+    masks.nii.gz                the same as 2D+t label map (3D Slicer)
+    contours.csv, .json         every frame's contour (point i is the same material point)
+    displacement_x_mm.nii.gz    Lagrangian displacement of frame 0's pixels, x (column) component
+    displacement_y_mm.nii.gz    … y (row) component; NaN on the known solids
+    quality.nii.gz              its per-pixel quality (local NCC with frame 0; 0 = filled)
+    material_points.csv         frame, point, kind (contour/interior), x_mm, y_mm, dx_mm, dy_mm, quality
+    tracking.json               speckle size, bar bloom, the bar's tracked push, timings
+    motion.png                  frame 0 and the last frame with the contours; displacement quiver; strain
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from hifumotion.speckle.displacement import DisplacementSeries
+from hifumotion.speckle.follow import FollowResult
+
+
+def interior_points_px(mask: np.ndarray, step_px: float) -> np.ndarray:
+    """Points ``(N, 2)`` (x, y px) on a grid of ``step_px`` inside ``mask`` eroded by one step."""
+    from scipy import ndimage
+
+    step = max(int(round(step_px)), 1)
+    inner = ndimage.binary_erosion(mask, iterations=step)
+    rows, cols = np.nonzero(inner)
+    keep = (rows % step == 0) & (cols % step == 0)
+    return np.column_stack([cols[keep], rows[keep]]).astype(float)
+
+
+def material_points(result: FollowResult, interior_step_mm: float = 1.0) -> dict[str, np.ndarray]:
+    """The material points of the fit: the contour's and a grid inside frame 0's section.
+
+    Returns ``kind`` (N,), ``rest_px`` (N, 2), ``displacement_mm`` (T, N, 2), ``quality`` (T, N).
+    """
+    series = result.displacement
+    spacing = series.spacing_mm
+    contour0 = result.contours[0].points_px
+    inner = interior_points_px(result.masks[0], interior_step_mm / float(np.mean(spacing)))
+    rest = np.vstack([contour0, inner])
+    kind = np.array(["contour"] * len(contour0) + ["interior"] * len(inner))
+    disp, qual = [], []
+    for t in range(series.n_frames):
+        d, q = series.at(rest, t)
+        disp.append(d)
+        qual.append(q)
+    return {"kind": kind, "rest_px": rest, "displacement_mm": np.stack(disp), "quality": np.stack(qual)}
+
+
+def material_points_csv(points: dict[str, np.ndarray], spacing_mm) -> str:
+    row, col = spacing_mm
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame", "point", "kind", "x0_mm", "y0_mm", "dx_mm", "dy_mm", "quality"])
+    rest_mm = points["rest_px"] * np.array([col, row])
+    for t in range(points["displacement_mm"].shape[0]):
+        d, q = points["displacement_mm"][t], points["quality"][t]
+        for i in range(len(rest_mm)):
+            w.writerow([t, i, points["kind"][i], f"{rest_mm[i, 0]:.4f}", f"{rest_mm[i, 1]:.4f}",
+                        "" if not np.isfinite(d[i, 0]) else f"{d[i, 0]:.5f}",
+                        "" if not np.isfinite(d[i, 1]) else f"{d[i, 1]:.5f}", f"{q[i]:.4f}"])
+    return buf.getvalue()
+
+
+def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) -> Path:
+    """Frame 0 with the last frame's displacement of its tissue (arrows, true length, from
+    where the material was) and both contours; the last frame with its contour; the last
+    frame's axial strain ε_yy on frame 0's grid."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hifumotion.io.files import atomic_path
+
+    series = result.displacement
+    last = series.n_frames - 1
+    row, col = series.spacing_mm
+    h, w = frames.shape[1:]
+    extent = (-0.5 * col, (w - 0.5) * col, -0.5 * row, (h - 0.5) * row)
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.8))
+    for a, t, title in ((ax[0], 0, f"frame 0, displacement to frame {last}"), (ax[1], last, f"frame {last}")):
+        a.imshow(frames[t], cmap="gray", vmin=0, vmax=1, origin="lower", extent=extent)
+        for k, colour in ((0, "yellow"), (last, "orange")):
+            if k == t or t == 0:
+                p = result.contours[k].points_mm
+                a.plot(np.r_[p[:, 0], p[:1, 0]], np.r_[p[:, 1], p[:1, 1]], color=colour, lw=1.2)
+        a.set_title(title)
+    u = series.displacement_mm[last]
+    step = max(1, int(round(2.0 / col)))
+    ys, xs = np.mgrid[0:h:step, 0:w:step]
+    inside = result.masks[0][ys, xs] & np.isfinite(u[ys, xs, 0])
+    ax[0].quiver(xs[inside] * col, ys[inside] * row, u[ys, xs, 0][inside], u[ys, xs, 1][inside],
+                 color="cyan", angles="xy", scale_units="xy", scale=1.0, width=0.004)
+    strain = np.where(result.masks[0], series.strain(last)[..., 1], np.nan)
+    lim = np.nanpercentile(np.abs(strain), 98) if np.isfinite(strain).any() else 1.0
+    im = ax[2].imshow(strain, cmap="RdBu_r", vmin=-lim, vmax=lim, origin="lower", extent=extent)
+    ax[2].set_title(f"axial strain ε_yy, frame {last}")
+    fig.colorbar(im, ax=ax[2], fraction=0.046)
+    for a in ax:
+        a.set_aspect("equal")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def write_tracking(folder: str | Path, frames: np.ndarray, result: FollowResult, frame_interval_s: float | None,
+                   extra: dict | None = None) -> dict:
+    """Write the layout of the module docstring into ``folder``; returns ``tracking.json``'s content."""
+    from hifumotion.io import write_contours_csv, write_contours_json, write_json, write_masks_nifti, write_png_stack
+    from hifumotion.io.files import write_text
+    from hifumotion.io.writers import write_nifti
+
+    folder = Path(folder)
+    series: DisplacementSeries = result.displacement
+    spacing = series.spacing_mm
+    write_png_stack(folder / "masks", result.masks)
+    write_masks_nifti(folder / "masks.nii.gz", result.masks, spacing, frame_interval_s)
+    contours = dict(enumerate(result.contours))
+    write_contours_csv(folder / "contours.csv", contours)
+    write_contours_json(folder / "contours.json", contours)
+    write_nifti(folder / "displacement_x_mm.nii.gz", series.displacement_mm[..., 0], spacing, frame_interval_s)
+    write_nifti(folder / "displacement_y_mm.nii.gz", series.displacement_mm[..., 1], spacing, frame_interval_s)
+    write_nifti(folder / "quality.nii.gz", series.quality, spacing, frame_interval_s)
+    points = material_points(result)
+    write_text(folder / "material_points.csv", material_points_csv(points, spacing))
+    motion_figure(frames, result, folder / "motion.png")
+    first = result.first
+    centroid = np.array([c.centroid_mm for c in result.contours])
+    summary = {
+        "frames": int(series.n_frames), "spacing_mm": list(spacing), "frame_interval_s": frame_interval_s,
+        "estimator": series.estimator,
+        "speckle_fwhm_px": None if first is None else [round(float(v), 3) for v in first.speckle_fwhm_px],
+        "bar_bloom_px": None if first is None else list(first.bloom_px),
+        "ms_per_frame_mean": round(1000 * float(np.mean(result.seconds_per_frame[1:])), 3)
+        if series.n_frames > 1 else None,
+        "centroid_shift_mm": np.round(np.linalg.norm(centroid - centroid[0], axis=1), 4).tolist(),
+        "bar_shift_mm": None if series.rigid_shift_mm is None else np.round(series.rigid_shift_mm, 4).tolist(),
+        "material_points": {"contour": int((points["kind"] == "contour").sum()),
+                            "interior": int((points["kind"] == "interior").sum())},
+        **(extra or {}),
+    }
+    write_json(folder / "tracking.json", summary)
+    return summary
+
+
+__all__ = ["write_tracking", "material_points", "material_points_csv", "interior_points_px", "motion_figure"]
