@@ -184,3 +184,64 @@ def test_bad_frames_are_clear_errors():
         displacement(np.full((2, 16, 16), np.nan), 0.2)
     with pytest.raises(InputError, match="shape"):
         displacement(np.zeros((2, 16, 16)), 0.2, exclude=np.zeros((8, 8), bool))
+
+
+def test_the_bars_bloom_is_measured_where_its_blur_falls_to_the_level():
+    """A bar of grey level 1 blurred by a Gaussian (σ = 2 px laterally) in black water: its grey
+    level falls to 0.25 at σ √(2 ln 2) ≈ 2.4 px… read beside it as 2 px (whole pixels below
+    the level), and the depth-wise bloom scaled by the PSF's aspect (rows/cols = 0.5)."""
+    from scipy import ndimage
+
+    from hifumotion.observed.solids import measure_bloom_px
+
+    bar = np.zeros((80, 80), bool)
+    bar[40:70, 30:50] = True
+    image = ndimage.gaussian_filter1d(bar.astype(float), 2.0, axis=1)
+    # at distance d beyond the edge the profile of a blurred step is ½ erfc(d / (σ√2)) ≈ 0.25 at d ≈ 1.35 σ
+    axial, lateral = measure_bloom_px(image, bar, 0.25, (1.5, 3.0))
+    from scipy.special import erfc
+
+    d = np.arange(1, 10)
+    expected = int(np.argmax(0.5 * erfc((d - 0.5) / (2.0 * np.sqrt(2))) <= 0.25))   # first d at or below
+    assert lateral == expected
+    assert axial == int(np.ceil(lateral * 0.5))
+
+
+def test_the_true_motion_of_a_rigidly_translated_twin_is_the_translation():
+    from hifumotion.experiment.motion_truth import true_motion
+    from hifumotion.observed import BarSetup, ImagingGeometry, PushSchedule, Setup, TankSetup
+
+    rng = np.random.default_rng(2)
+    rest = np.column_stack([rng.uniform(10, 20, 4000), rng.uniform(0, 8, 4000), rng.uniform(8, 12, 4000)])
+    shift = np.array([0.31, -0.17, 0.05])
+    positions = np.stack([rest, rest + shift])
+    imaging = ImagingGeometry(image_shape=[60, 80], pixel_mm=0.3, column_axis=[1.0, 0.0, 0.0],
+                              row_axis=[0.0, 1.0, 0.0], row0_col0_mm=[5.0, -2.0], frames_plane_z_mm=10.0,
+                              sweep_z_mm=[10.0])
+    setup = Setup(frame_interval_s=0.05, frames=2, initial_contour_frame=0, imaging=imaging,
+                  tank=TankSetup(size_mm=(40.0, 30.0, 20.0), water_depth_mm=10.0),
+                  bar=BarSetup(enabled=False, radius_mm=2.0, length_mm=5.0, direction=(0.0, -1.0, 0.0),
+                               tip_at_rest_mm=(20.0, 15.0, 10.0), weight_supported=True),
+                  push=PushSchedule(shape="ramp_hold", ramp_s=0.1))
+    masks = np.zeros((2, 60, 80), bool)
+    masks[:, 12:30, 20:45] = True
+    truth = true_motion(positions, 0.3, setup, masks)
+    inside = truth.displacement_mm[1][masks[0]]
+    assert np.allclose(inside, shift[:2], atol=1e-9)
+    assert np.isnan(truth.displacement_mm[1][~masks[0]]).all()
+
+
+def test_the_plane_fill_carries_a_linear_field_into_a_gap():
+    """Under the bar the compression goes on: a linear field's gap is filled with the plane."""
+    from hifumotion.speckle._fill import linear_fill
+
+    rows, cols = np.mgrid[0:64, 0:64].astype(np.float32)
+    field = np.dstack([0.01 * cols + 0.3, -0.02 * rows])
+    weight = np.ones((64, 64), np.float32)
+    gap = np.zeros((64, 64), bool)
+    gap[24:32, 20:44] = True                          # a band the size of the bar's footprint
+    weight[gap] = 0.0
+    damaged = np.where(gap[..., None], 0.0, field).astype(np.float32)
+    out = linear_fill(damaged, weight, gap, 6.0)
+    assert np.abs(out[gap] - field[gap]).max() < 0.01     # the gradient (0.16 across the gap) is kept
+    assert np.array_equal(out[~gap], damaged[~gap])

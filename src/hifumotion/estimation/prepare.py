@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.errors import InputError
-from hifumotion.observed import Observed, Setup
+from hifumotion.observed import Observed
 from hifumotion.particles.section import Plane
 from hifumotion.reconstruction import Reconstruction, reconstruct
 from hifumotion.segmentation.sweep import SweepSegmentation, segment_sweep

@@ -56,7 +56,7 @@ def dis_flow(patch_px: int = 8, stride_px: int = 3) -> Flow:
     return flow
 
 
-def farneback_flow(levels: int = 0, window_px: int = 15, iterations: int = 3) -> Flow:
+def farneback_flow(levels: int = 0, window_px: int = 15, iterations: int = 1) -> Flow:
     """OpenCV's Farnebäck flow (polynomial expansion; ``levels`` extra pyramid levels).
 
     The tracker always starts it from the previous frame's estimate, within a pixel or two

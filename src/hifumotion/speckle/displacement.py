@@ -6,22 +6,22 @@ material points, the paper's D_t (Section 2.2.2), at every pixel rather than onl
 at the boundary a segmentation sees.
 
 The field is Lagrangian: ``u_t(X)`` (mm) is where the material at pixel ``X`` of
-frame 0 has gone by frame ``t`` (``x = X + u_t(X)``). It is built in two moves per
-frame, so frame-to-frame errors do not accumulate (drift control):
+frame 0 has gone by frame ``t`` (``x = X + u_t(X)``). Per frame (:func:`displacement`):
 
-1. **predict** by composition with the frame-to-frame flow ``f`` from ``t−1`` to
-   ``t``: ``u_t(X) = u_{t−1}(X) + f(X + u_{t−1}(X))``;
-2. **correct** by direct registration to frame 0: frame ``t`` pulled back through the
-   prediction, ``W(X) = I_t(X + u_t(X))``, is registered to ``I_0``; its residual
-   shift ``d`` (small) updates ``u_t(X) ← d(X) + u_t(X + d(X))``.
+1. **register directly** frame ``t`` to the reference frame (frame 0, or a later keyframe
+   once the speckle has decorrelated from it), the flow started from the previous frame's
+   estimate: a frame-to-frame chain would add every step's error (it drifted 2–3 × more
+   on the twins, docs/decisions.md), a direct registration does not;
+2. **keep the solids out**: the bar is tracked on its own echo (:class:`RigidTracker`);
+   where a solid (the bar, the floor, their measured blur) is in either image, frame
+   ``t`` shows the reference moved by the current estimate, so the estimator's window
+   never reads a solid's motion as the tissue's;
+3. **grade and fill**: each pixel's *quality* is the local normalised cross-correlation
+   of the reference with frame ``t`` pulled back through the estimate; tissue under a
+   solid in frame ``t`` (occluded) gets quality 0; a quality-weighted normalised
+   convolution at the speckle's scale smooths the field and fills what was not seen.
 
-The correction only helps while frame ``t`` still correlates with frame 0; where
-the speckle has decorrelated (large strain, out-of-plane motion) it is skipped
-pixel by pixel: each pixel keeps whichever of the predicted and corrected estimate
-matches frame 0 better (the local normalised cross-correlation, the *quality*).
-
-Pixels known not to be tissue (the pool's floor, the bar: ``exclude``) carry no
-displacement (NaN) and quality 0.
+Pixels of the solids on frame 0 carry no displacement (NaN) and quality 0.
 """
 
 from __future__ import annotations
@@ -45,6 +45,14 @@ def _remap(field: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.ndarra
 
     return cv2.remap(np.ascontiguousarray(field, np.float32), map_x, map_y, cv2.INTER_LINEAR,
                      borderMode=cv2.BORDER_REPLICATE)
+
+
+def _remap_mask(mask: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
+    """A boolean mask sampled (nearest pixel) at ``(map_x, map_y)``; outside the image: False."""
+    import cv2
+
+    return cv2.remap(mask.view(np.uint8), map_x, map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=0).astype(bool)
 
 
 def local_ncc(a: np.ndarray, b: np.ndarray, window_px: int = QUALITY_WINDOW_PX) -> np.ndarray:
@@ -153,6 +161,32 @@ class DisplacementSeries:
 KEYFRAME_QUALITY = 0.6
 
 
+def _fill_gap(field: np.ndarray, weight: np.ndarray, covered_now: np.ndarray, tissue: np.ndarray,
+              sigma_px: float) -> np.ndarray:
+    """Tissue pixels (``tissue``, reference grid) whose material lies under ``covered_now`` (a
+    solid in the current frame) replaced by a local plane fitted to the visible tissue around
+    them (:func:`~hifumotion.speckle._fill.linear_fill`). Computed only on the box around the
+    solid, grown by the largest displacement and three windows: a thin gap costs its box."""
+    from hifumotion.speckle._fill import linear_fill
+
+    rows, cols = np.nonzero(covered_now)
+    if rows.size == 0:
+        return field
+    h, w = covered_now.shape
+    reach = int(np.ceil(np.abs(field).max())) + int(np.ceil(3 * sigma_px)) + 2
+    r0, r1 = max(rows.min() - reach, 0), min(rows.max() + 1 + reach, h)
+    c0, c1 = max(cols.min() - reach, 0), min(cols.max() + 1 + reach, w)
+    box = (slice(r0, r1), slice(c0, c1))
+    f = field[box]
+    gy, gx = np.mgrid[r0:r1, c0:c1].astype(np.float32)
+    gap = _remap_mask(covered_now, gx + f[..., 0], gy + f[..., 1]) & tissue[box]
+    if not gap.any():
+        return field
+    out = field.copy()
+    out[box] = linear_fill(f, weight[box] * tissue[box], gap, sigma_px)
+    return out
+
+
 def _shifted(mask: np.ndarray, shift_px: np.ndarray) -> np.ndarray:
     """``mask`` translated by ``shift_px`` (x, y) px (nearest pixel)."""
     import cv2
@@ -218,7 +252,8 @@ class RigidTracker:
 
 def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | None = None,
                  rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
-                 keyframe_quality: float = KEYFRAME_QUALITY, progress: bool = False) -> DisplacementSeries:
+                 keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane",
+                 progress: bool = False) -> DisplacementSeries:
     """Track the speckle of a cine loop: the displacement of frame 0's material points at every frame.
 
     Each frame is registered directly to the current reference frame (frame 0, or the
@@ -255,6 +290,11 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         the flow gave them).
     keyframe_quality
         The median quality below which a new reference frame is started (0: never).
+    fill
+        How the tissue under the bar is filled: ``"plane"`` (default) a local plane fitted to
+        the visible tissue around it, so the push's compression carries on under the bar;
+        ``"mean"`` only the normalised convolution's weighted mean (about 30 % faster, and
+        15–25 % less accurate on the twins: docs/decisions.md).
     progress
         Show a progress bar.
 
@@ -292,6 +332,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     exclude, rigid = given.get("exclude"), given.get("rigid")
     static = exclude if exclude is not None else np.zeros((h, w), bool)
     solid0 = static | (rigid if rigid is not None else False)
+    if fill not in ("plane", "mean"):
+        raise InputError(f"unknown fill {fill!r}; expected plane or mean", "fill")
     flow = flow_estimator(estimator)
     # the speckle's size and the grey levels, measured on frame 0 away from the solids
     bright = (frames[0] > np.percentile(frames[0][~solid0], 50)) & ~solid0
@@ -306,8 +348,11 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
             element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * bloom[1] + 1, 2 * bloom[0] + 1))
     tracker = RigidTracker(frames[0], rigid) if rigid is not None else None
 
-    def solids_at(shift: np.ndarray) -> np.ndarray:
-        return _grow(static | (_shifted(rigid, shift) if rigid is not None else False), element)
+    def solids_at(shift: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The solids grown by their blur in a frame, and the rigid one alone."""
+        bar = _grow(_shifted(rigid, shift), element) if rigid is not None else None
+        grown_static = _grow(static, element) if static.any() else static
+        return (grown_static | bar if bar is not None else grown_static), bar
 
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     out = np.zeros((t_count, h, w, 2), np.float32)
@@ -316,11 +361,12 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     seconds = np.zeros(t_count)
     rigid_path = np.zeros((t_count, 2), np.float32)
     key = 0                                    # the reference frame
-    covered_key = solids_at(np.zeros(2))       # the solids (and their bloom) in the reference
+    covered_key, _ = solids_at(np.zeros(2))    # the solids (and their bloom) in the reference
     reference = frames[0]
     u_key = np.zeros((h, w, 2), np.float32)    # frame 0 → reference (frame-0 grid)
     v = np.zeros((h, w, 2), np.float32)        # reference → current (reference grid)
     textured = None                            # frame-0 pixels with speckle to track (set at frame 1)
+    tissue_key = None                          # the same pixels on the reference's grid
     steps = range(1, t_count)
     if progress:
         from hifumotion.console import track as progress_bar
@@ -329,35 +375,49 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     for t in steps:
         t0 = time.perf_counter()
         shift = tracker.update(frames[t]) if tracker is not None else np.zeros(2, np.float32)
-        covered = solids_at(shift)
+        covered, bar_now = solids_at(shift)
         current = frames[t]
-        if covered.any() or covered_key.any():
+        any_solid = covered.any() or covered_key.any()
+        if any_solid:
             # where a solid is (now, or was in the reference) frame t shows the reference moved
             # by the estimate so far: those pixels agree with it, and no solid's motion reaches
             # the tissue through the estimator's window
             back_x, back_y = gx - v[..., 0], gy - v[..., 1]
-            replace = covered | (_remap(covered_key.astype(np.float32), back_x, back_y) > 0.5)
+            replace = covered | (_remap_mask(covered_key, back_x, back_y))
             current = np.where(replace, _remap(reference, back_x, back_y), current)
         # register frame t directly to the reference, starting from the previous estimate
         v = flow(reference, current, v)
-        q = local_ncc(reference, _remap(frames[t], gx + v[..., 0], gy + v[..., 1]))
-        weight = np.clip(q, 0.0, 1.0) ** 2
-        if covered.any() or covered_key.any():
-            hidden = _remap(covered.astype(np.float32), gx + v[..., 0], gy + v[..., 1]) > 0.5
+        ahead_x, ahead_y = gx + v[..., 0], gy + v[..., 1]
+        weight = np.clip(local_ncc(reference, _remap(frames[t], ahead_x, ahead_y)), 0.0, 1.0)
+        weight *= weight
+        hidden = None
+        if any_solid:
+            hidden = _remap_mask(covered, ahead_x, ahead_y)
             weight[hidden | covered_key] = 0.0
         if smoothing > 0:
             v = normalized_convolution(v, weight, sigma)
+            if fill == "plane" and rigid is not None and tissue_key is not None:
+                # tissue under the bar carries on the visible tissue's gradient (the push's
+                # compression), not only its mean: a plane fitted around the gap
+                v = _fill_gap(v, weight, bar_now, tissue_key, 4.0 * max(sigma))
         # back on frame 0's grid
-        mx, my = gx + u_key[..., 0], gy + u_key[..., 1]
-        out[t] = u_key + _remap(v, mx, my)
-        quality[t] = np.sqrt(np.clip(_remap(weight, mx, my), 0.0, 1.0))
+        if key == 0:
+            out[t] = v
+            quality[t] = np.sqrt(weight)
+        else:
+            mx, my = gx + u_key[..., 0], gy + u_key[..., 1]
+            out[t] = u_key + _remap(v, mx, my)
+            quality[t] = np.sqrt(np.clip(_remap(weight, mx, my), 0.0, 1.0))
         rigid_path[t] = shift
         seconds[t] = time.perf_counter() - t0
         if textured is None:
             textured = (quality[t] > 0.5) & ~solid0
+            tissue_key = textured
         if (keyframe_quality > 0 and t < t_count - 1 and textured.any()
                 and np.median(quality[t][textured]) < keyframe_quality):
             key, u_key, v = t, out[t].copy(), np.zeros((h, w, 2), np.float32)
+            # frame 0's tissue pixels seen from the new reference (X ≈ Y − u(Y))
+            tissue_key = _remap_mask(textured, gx - u_key[..., 0], gy - u_key[..., 1])
             covered_key, reference = covered, frames[t]
     row, col = spacing
     out *= np.array([col, row], np.float32)

@@ -132,9 +132,36 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
     return TargetSegmentation(mask, excluded, bloom, fwhm)
 
 
+def refine_in_band(image: np.ndarray, carried: np.ndarray, excluded: np.ndarray, background: float,
+                   band_px: int, iterations: int, method: str, spacing_mm, boundary_offset_mm: float,
+                   params: dict) -> np.ndarray:
+    """The carried mask corrected by a few level-set iterations on ``image`` (the solids set to
+    the background level), allowed to move the boundary by at most ``band_px`` either way,
+    then moved inwards by the boundary offset on its free boundary, as frame 0 was."""
+    from scipy import ndimage
+
+    from hifumotion.observed import shift_boundary
+    from hifumotion.segmentation import segment
+    from hifumotion.sequence import as_spacing_mm
+
+    masked = np.where(excluded, np.float32(background), image)
+    # the segmentation's own boundary lies outside the true one by the offset: start it there
+    pixel = float(np.mean(as_spacing_mm(spacing_mm)))
+    start = shift_boundary(carried, -boundary_offset_mm, pixel) if boundary_offset_mm else carried
+    got = segment(masked, start, method, spacing_mm, multiscale=False, max_iterations=iterations, **params).mask
+    inner = ndimage.binary_erosion(carried, iterations=band_px)
+    outer = ndimage.binary_dilation(carried, iterations=band_px)
+    got = (got & outer) | inner
+    got &= ~excluded
+    if boundary_offset_mm:
+        got = shift_boundary(got | excluded, boundary_offset_mm, pixel) & ~excluded
+    return got if got.any() else carried
+
+
 def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = None,
            boundary_offset_mm: float = 0.0, method: str = "glcv", series: DisplacementSeries | None = None,
-           point_step_px: float = 1.0, progress: bool = False, **params: Any) -> FollowResult:
+           point_step_px: float = 1.0, refine_iterations: int = 0, refine_band_px: int = 2,
+           progress: bool = False, **params: Any) -> FollowResult:
     """Segment frame 0 and carry its contour through the cine loop by speckle tracking.
 
     Parameters
@@ -159,10 +186,17 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
         :func:`~hifumotion.speckle.displacement` runs).
     point_step_px
         Spacing of the carried material points along frame 0's contour (px).
+    refine_iterations, refine_band_px
+        With ``refine_iterations`` > 0, each carried mask is corrected by that many iterations
+        of ``method`` on its frame, within ``refine_band_px`` of the carried boundary
+        (:func:`refine_in_band`); 0 (the default, chosen by measurement: docs/decisions.md)
+        keeps the carried contour as it is.
     progress
         Show a progress bar.
     """
+    from hifumotion.observed.solids import bloom_mask
     from hifumotion.sequence import ImageSequence
+    from hifumotion.speckle.displacement import _shifted
 
     if isinstance(frames, ImageSequence):
         spacing_mm = spacing_mm if spacing_mm is not None else frames.spacing_mm
@@ -188,7 +222,19 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
         contours.append(c)
         # the material as the image shows it: not clipped at the solids (a penalty contact in
         # a simulation, or a compliant membrane, lets tissue past where the solid was)
-        masks.append(c.to_mask(shape) if t else first.mask)
+        mask = c.to_mask(shape) if t else first.mask
+        if t and refine_iterations > 0:
+            excluded = np.zeros(shape, bool)
+            if solids is not None:
+                bar = solids.bar
+                if series.rigid_shift_mm is not None:
+                    row, col = series.spacing_mm
+                    bar = _shifted(bar, series.rigid_shift_mm[t] / np.array([col, row]))
+                excluded = solids.floor | bloom_mask(bar, first.bloom_px)
+            background = float(np.median(frames[0][~first.mask & ~first.excluded]))
+            mask = refine_in_band(frames[t], mask, excluded, background, refine_band_px, refine_iterations,
+                                  method, spacing_mm, boundary_offset_mm, params)
+        masks.append(mask)
         quality.append(q)
         seconds[t] += time.perf_counter() - t1
     return FollowResult(np.stack(masks), contours, series, np.stack(quality), seconds, first)
