@@ -172,6 +172,19 @@ def speed_256(frames: np.ndarray, solids, count: int) -> dict:
         cv2.setNumThreads(threads_cv)
         numba.set_num_threads(threads_nb)
     out["ms_per_frame_median"] = out["fill_plane"]["ms_per_frame_median"]    # the default
+    # the machine's speed in the same run: one bare Farnebäck call on these frames (the host's
+    # speed drifts by tens of per cent; the ratio does not)
+    u8 = np.clip(big * 255, 0, 255).astype(np.uint8)
+    init = np.zeros(u8.shape[1:] + (2,), np.float32)
+    cv2.setNumThreads(1)
+    t0 = time.perf_counter()
+    for k in range(1, min(count, 40)):
+        cv2.calcOpticalFlowFarneback(u8[0], u8[k], init.copy(), 0.5, 0, 15, 1, 5, 1.1, cv2.OPTFLOW_USE_INITIAL_FLOW)
+    cv2.setNumThreads(threads_cv)
+    call = 1000 * (time.perf_counter() - t0) / (min(count, 40) - 1)
+    out["bare_farneback_call_ms"] = round(call, 2)
+    out["per_frame_over_one_farneback_call"] = {f: round(out[f"fill_{f}"]["ms_per_frame_median"] / call, 2)
+                                                for f in ("plane", "mean")}
     return out
 
 

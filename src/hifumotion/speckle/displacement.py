@@ -348,10 +348,11 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
             element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * bloom[1] + 1, 2 * bloom[0] + 1))
     tracker = RigidTracker(frames[0], rigid) if rigid is not None else None
 
+    grown_static = _grow(static, element) if static.any() else static   # it does not move
+
     def solids_at(shift: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The solids grown by their blur in a frame, and the rigid one alone."""
         bar = _grow(_shifted(rigid, shift), element) if rigid is not None else None
-        grown_static = _grow(static, element) if static.any() else static
         return (grown_static | bar if bar is not None else grown_static), bar
 
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
