@@ -335,6 +335,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     if fill not in ("plane", "mean"):
         raise InputError(f"unknown fill {fill!r}; expected plane or mean", "fill")
     flow = flow_estimator(estimator)
+    if (~solid0).sum() < 64:
+        raise InputError("the known solids cover (almost) the whole image: no tissue left to track", "exclude")
     # the speckle's size and the grey levels, measured on frame 0 away from the solids
     bright = (frames[0] > np.percentile(frames[0][~solid0], 50)) & ~solid0
     fwhm = speckle_fwhm_px(frames[0], bright if bright.sum() > 64 else None)
