@@ -225,3 +225,33 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     # existing output is never overwritten without --overwrite
     again = subprocess.run(cli + ["predict", str(cal), "-o", str(pred)], capture_output=True, text=True)
     assert again.returncode == 2 and "overwrite" in (again.stdout + again.stderr)
+
+
+def test_the_displacement_objective_is_the_weighted_difference_of_the_points_motion():
+    """Points A that move as the speckle says leave no displacement residual; a point moved
+    0.2 mm too far in x leaves 0.2 × its quality; an occluded point (quality 0) leaves none."""
+    from hifumotion.estimation.objective import TrainingData, residuals_mm
+    from hifumotion.particles.section import Plane
+    from hifumotion.speckle import DisplacementSeries
+
+    plane = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (40, 40), 0.5)
+    masks = np.zeros((3, 40, 40), bool)
+    masks[:, 10:30, 10:30] = True
+    data = TrainingData.from_masks(masks, [1, 2], plane)
+    field = np.zeros((3, 40, 40, 2), np.float32)
+    field[1] = (0.3, -0.1)                                  # the observed displacement, mm
+    field[2] = (0.6, -0.2)
+    quality = np.ones((3, 40, 40), np.float32)
+    quality[:, :, 25:] = 0.0                                # the right side unseen
+    series = DisplacementSeries(field, quality, (0.5, 0.5))
+    rest = np.array([[7.5, 7.5, 5.0], [10.0, 12.0, 5.0], [14.0, 8.0, 5.0]])   # mm; the last one unseen (x px 28)
+    data = data.with_displacement(series, rest)
+    points = np.stack([rest, rest + (0.3, -0.1, 0.0), rest + (0.6, -0.2, 0.0)])
+    points[2, 0, 0] += 0.2                                  # point 0 at frame 2: 0.2 mm too far in x
+    points[2, 2, 0] += 0.5                                  # the unseen point: no residual whatever it does
+    r = residuals_mm(points, data)
+    assert r.shape == (2, 9)
+    disp = r[:, 3:].reshape(2, 3, 2)
+    assert np.allclose(disp[0], 0.0, atol=1e-6)
+    assert disp[1, 0] == pytest.approx([0.2, 0.0], abs=1e-6)
+    assert np.allclose(disp[1, 1:], 0.0, atol=1e-6)
