@@ -34,8 +34,12 @@ def normalized_convolution(field: np.ndarray, weight: np.ndarray, sigma_px: tupl
     """
     import cv2
 
-    f = np.ascontiguousarray(np.nan_to_num(field, nan=0.0), np.float32)
-    w = np.ascontiguousarray(np.clip(weight, 0.0, None), np.float32)
+    f = np.ascontiguousarray(field, np.float32)
+    if not np.isfinite(f).all():
+        f = np.nan_to_num(f, nan=0.0)
+    w = np.ascontiguousarray(weight, np.float32)
+    if w.min() < 0:
+        w = np.clip(w, 0.0, None)
     den = _blur(w, sigma_px)
     num = _blur(f * w[..., None], sigma_px)
     if num.ndim == 2:
@@ -56,8 +60,11 @@ def normalized_convolution(field: np.ndarray, weight: np.ndarray, sigma_px: tupl
         up = cv2.resize(estimate, (d.shape[1], d.shape[0]), interpolation=cv2.INTER_LINEAR)
         if up.ndim == 2:
             up = up[..., None]
-        alpha = np.minimum(d / ENOUGH_WEIGHT, 1.0)[..., None]
-        estimate = alpha * (n / np.maximum(d, 1e-12)[..., None]) + (1.0 - alpha) * up
+        # estimate = α n/d + (1 − α) up with α = min(d / ENOUGH, 1), written so that where α = 1
+        # (most pixels) it costs one division
+        alpha = np.minimum(d * np.float32(1.0 / ENOUGH_WEIGHT), np.float32(1.0))[..., None]
+        own = n / np.maximum(d, np.float32(1e-12))[..., None]
+        estimate = up + alpha * (own - up)
     return estimate.astype(np.float32, copy=False)
 
 
@@ -73,10 +80,11 @@ def linear_fill(field: np.ndarray, weight: np.ndarray, where: np.ndarray, sigma_
         return out
     h, w = weight.shape
     size = (max(w // 2, 1), max(h // 2, 1))
-    sw = cv2.resize(np.ascontiguousarray(weight, np.float32), size, interpolation=cv2.INTER_AREA).astype(np.float64)
+    # float32 moments: coordinates are centred on the (small) box, so x² stays in the hundreds
+    sw = cv2.resize(np.ascontiguousarray(weight, np.float32), size, interpolation=cv2.INTER_AREA)
     sf = cv2.resize(np.ascontiguousarray(field * weight[..., None], np.float32), size, interpolation=cv2.INTER_AREA)
     sf = sf.reshape(size[1], size[0], -1) / np.maximum(sw, 1e-9)[..., None]
-    ys, xs = np.mgrid[0:size[1], 0:size[0]].astype(np.float64)
+    ys, xs = np.mgrid[0:size[1], 0:size[0]].astype(np.float32)
     xs -= size[0] / 2.0
     ys -= size[1] / 2.0
     s = max(float(sigma_px) / 2.0, 1.0)
@@ -86,7 +94,7 @@ def linear_fill(field: np.ndarray, weight: np.ndarray, where: np.ndarray, sigma_
 
     m = [g(sw), g(sw * xs), g(sw * ys), g(sw * xs * xs), g(sw * xs * ys), g(sw * ys * ys)]
     mat = np.stack([np.stack([m[0], m[1], m[2]], -1), np.stack([m[1], m[3], m[4]], -1),
-                    np.stack([m[2], m[4], m[5]], -1)], -2) + np.eye(3) * 1e-12
+                    np.stack([m[2], m[4], m[5]], -1)], -2).astype(np.float64) + np.eye(3) * 1e-12
     # only where the gap is (on the coarse grid, grown by a pixel for the interpolation back)
     need = cv2.dilate(cv2.resize(where.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST),
                       np.ones((3, 3), np.uint8)).astype(bool)
@@ -102,7 +110,7 @@ def linear_fill(field: np.ndarray, weight: np.ndarray, where: np.ndarray, sigma_
         inv = np.linalg.inv(sub)
         for c in range(sf.shape[-1]):
             f = sf[..., c] * sw
-            rhs = np.stack([g(f), g(f * xs), g(f * ys)], -1)[ok]
+            rhs = np.stack([g(f), g(f * xs), g(f * ys)], -1)[ok].astype(np.float64)
             coef = np.einsum("nij,nj->ni", inv, rhs)
             fit[..., c][ok] = coef[:, 0] + coef[:, 1] * xs[ok] + coef[:, 2] * ys[ok]
     up = cv2.resize(fit, (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w, -1)

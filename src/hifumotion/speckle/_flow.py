@@ -2,6 +2,7 @@
 
 Every estimator answers the same question: for each pixel ``x`` of ``reference``, the
 shift ``f(x)`` (px, ``(dx, dy)`` = (column, row)) with ``moving(x + f(x)) ≈ reference(x)``.
+Frames are float32 in [0, 1] or uint8 (0–255).
 
 =============  ======================================================  ===========================
 name           estimator                                               library
@@ -29,8 +30,15 @@ Flow = Callable[[np.ndarray, np.ndarray, np.ndarray | None], np.ndarray]
 
 
 def _u8(image: np.ndarray) -> np.ndarray:
-    """A frame in [0, 1] as uint8 (what OpenCV's flows take)."""
+    """A frame in [0, 1] as uint8 (what OpenCV's flows take); a uint8 frame as it is."""
+    if image.dtype == np.uint8:
+        return image
     return np.clip(np.rint(np.asarray(image, np.float32) * 255.0), 0, 255).astype(np.uint8)
+
+
+def _unit(image: np.ndarray) -> np.ndarray:
+    """A frame as float32 in [0, 1] (uint8 frames divided by 255)."""
+    return image.astype(np.float32) / 255.0 if image.dtype == np.uint8 else np.asarray(image, np.float32)
 
 
 def dis_flow(patch_px: int = 8, stride_px: int = 3) -> Flow:
@@ -83,7 +91,7 @@ def ilk_flow(radius_px: int = 7) -> Flow:
     from skimage.registration import optical_flow_ilk
 
     def flow(reference: np.ndarray, moving: np.ndarray, initial: np.ndarray | None = None) -> np.ndarray:
-        v, u = optical_flow_ilk(np.asarray(reference, np.float32), np.asarray(moving, np.float32), radius=radius_px,
+        v, u = optical_flow_ilk(_unit(reference), _unit(moving), radius=radius_px,
                                 num_warp=5, prefilter=True)
         return np.dstack([u, v]).astype(np.float32)
 
@@ -95,7 +103,7 @@ def tvl1_flow(attachment: float = 15.0) -> Flow:
     from skimage.registration import optical_flow_tvl1
 
     def flow(reference: np.ndarray, moving: np.ndarray, initial: np.ndarray | None = None) -> np.ndarray:
-        v, u = optical_flow_tvl1(np.asarray(reference, np.float32), np.asarray(moving, np.float32),
+        v, u = optical_flow_tvl1(_unit(reference), _unit(moving),
                                  attachment=attachment, num_warp=5)
         return np.dstack([u, v]).astype(np.float32)
 

@@ -365,7 +365,9 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     rigid_path = np.zeros((t_count, 2), np.float32)
     key = 0                                    # the reference frame
     covered_key, _ = solids_at(np.zeros(2))    # the solids (and their bloom) in the reference
+    frames_u8 = np.clip(np.rint(frames * 255.0), 0, 255).astype(np.uint8)   # what the flow reads, once
     reference = frames[0]
+    reference_u8 = frames_u8[0]
     u_key = np.zeros((h, w, 2), np.float32)    # frame 0 → reference (frame-0 grid)
     v = np.zeros((h, w, 2), np.float32)        # reference → current (reference grid)
     textured = None                            # frame-0 pixels with speckle to track (set at frame 1)
@@ -379,7 +381,7 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         t0 = time.perf_counter()
         shift = tracker.update(frames[t]) if tracker is not None else np.zeros(2, np.float32)
         covered, bar_now = solids_at(shift)
-        current = frames[t]
+        current = frames_u8[t]
         any_solid = covered.any() or covered_key.any()
         if any_solid:
             # where a solid is (now, or was in the reference) frame t shows the reference moved
@@ -387,9 +389,10 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
             # the tissue through the estimator's window
             back_x, back_y = gx - v[..., 0], gy - v[..., 1]
             replace = covered | (_remap_mask(covered_key, back_x, back_y))
-            current = np.where(replace, _remap(reference, back_x, back_y), current)
+            moved = cv2.remap(reference_u8, back_x, back_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            current = np.where(replace, moved, current)
         # register frame t directly to the reference, starting from the previous estimate
-        v = flow(reference, current, v)
+        v = flow(reference_u8, current, v)
         ahead_x, ahead_y = gx + v[..., 0], gy + v[..., 1]
         weight = np.clip(local_ncc(reference, _remap(frames[t], ahead_x, ahead_y)), 0.0, 1.0)
         weight *= weight
@@ -421,7 +424,7 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
             key, u_key, v = t, out[t].copy(), np.zeros((h, w, 2), np.float32)
             # frame 0's tissue pixels seen from the new reference (X ≈ Y − u(Y))
             tissue_key = _remap_mask(textured, gx - u_key[..., 0], gy - u_key[..., 1])
-            covered_key, reference = covered, frames[t]
+            covered_key, reference, reference_u8 = covered, frames[t], frames_u8[t]
     row, col = spacing
     out *= np.array([col, row], np.float32)
     out[:, solid0] = np.nan
