@@ -41,12 +41,12 @@ def scatterers():
 
 
 def test_a_sub_pixel_translation_is_measured(scatterers):
-    """Speckle moved by (0.37, −0.23) px: the field's mean within 0.02 px, each component."""
+    """Speckle moved by (0.37, −0.23) px: the field's mean within 0.05 px, each component."""
     shift_px = np.array([0.37, -0.23])
     a = image(scatterers)
     b = image(scatterers, scatterers.positions_mm + shift_px * PX)
     u = displacement(np.stack([a, b]), PX).displacement_mm[1][16:-16, 16:-16] / PX
-    assert np.abs(u.reshape(-1, 2).mean(0) - shift_px).max() < 0.02
+    assert np.abs(u.reshape(-1, 2).mean(0) - shift_px).max() < 0.05
     # per pixel the estimate scatters by a fraction of a pixel (speckle-limited), without outliers
     assert np.sqrt(((u - shift_px) ** 2).sum(-1).mean()) < 0.1
 

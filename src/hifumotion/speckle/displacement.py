@@ -157,8 +157,47 @@ class DisplacementSeries:
         return np.dstack([dux_dx, duy_dy, 0.5 * (dux_dy + duy_dx)]).astype(np.float32)
 
 
+#: Width of the Lucas–Kanade window in speckle sizes (σ = this × the speckle's FWHM / 2.355 per axis),
+#: chosen on a twin outside the benchmark's (docs/decisions.md).
+LK_WINDOW = 6.0
 #: Start a new reference frame (keyframe) when the median quality of the tissue falls below this.
 KEYFRAME_QUALITY = 0.6
+
+
+class LucasKanade:
+    """Dense Lucas–Kanade refinement of a flow against one reference frame (Lucas & Kanade 1981):
+    the reference's gradients and their Gaussian-windowed structure tensor are computed once;
+    each refinement pulls the moving frame back through the flow and solves, at every pixel,
+    the 2 × 2 system of the windowed residual — one Gauss–Newton step on the speckle itself."""
+
+    def __init__(self, reference: np.ndarray, sigma_px: tuple[float, float]):
+        import cv2
+
+        ref = np.asarray(reference, np.float32)
+        self.reference = ref
+        self.sigma = sigma_px
+        self.ix = cv2.Sobel(ref, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        self.iy = cv2.Sobel(ref, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        a11, a12, a22 = (self._g(x) for x in (self.ix * self.ix, self.ix * self.iy, self.iy * self.iy))
+        det = a11 * a22 - a12 * a12
+        floor = 1e-3 * float(np.median(a11 + a22)) ** 2 + 1e-12
+        ok = det > floor
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0).astype(np.float32)
+        self.m11, self.m12, self.m22 = a22 * inv, -a12 * inv, a11 * inv
+
+    def _g(self, x):
+        import cv2
+
+        sr, sc = self.sigma
+        return cv2.GaussianBlur(x, (0, 0), sigmaX=float(sc), sigmaY=float(sr), borderType=cv2.BORDER_REFLECT)
+
+    def refine(self, moving: np.ndarray, flow: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+        """The flow (px, reference grid) after one Gauss–Newton step (each component ≤ 1 px)."""
+        pulled = _remap(moving, gx + flow[..., 0], gy + flow[..., 1])
+        it = pulled - self.reference
+        b1, b2 = self._g(self.ix * it), self._g(self.iy * it)
+        step = np.dstack([self.m11 * b1 + self.m12 * b2, self.m12 * b1 + self.m22 * b2])
+        return flow - np.clip(step, -1.0, 1.0)
 
 
 def _fill_gap(field: np.ndarray, weight: np.ndarray, covered_now: np.ndarray, tissue: np.ndarray,
@@ -252,8 +291,8 @@ class RigidTracker:
 
 def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | None = None,
                  rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
-                 keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane",
-                 progress: bool = False) -> DisplacementSeries:
+                 keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane", lk_iterations: int = 1,
+                 lk_window: float = LK_WINDOW, progress: bool = False) -> DisplacementSeries:
     """Track the speckle of a cine loop: the displacement of frame 0's material points at every frame.
 
     Each frame is registered directly to the current reference frame (frame 0, or the
@@ -290,6 +329,9 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         the flow gave them).
     keyframe_quality
         The median quality below which a new reference frame is started (0: never).
+    lk_iterations, lk_window
+        Lucas–Kanade steps after the flow (:class:`LucasKanade`; 0 for none) and their
+        window in speckle sizes.
     fill
         How the tissue under the bar is filled: ``"plane"`` (default) a local plane fitted to
         the visible tissue around it, so the push's compression carries on under the bar;
@@ -371,6 +413,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     u_key = np.zeros((h, w, 2), np.float32)    # frame 0 → reference (frame-0 grid)
     v = np.zeros((h, w, 2), np.float32)        # reference → current (reference grid)
     textured = None                            # frame-0 pixels with speckle to track (set at frame 1)
+    lk = None                                  # the Lucas–Kanade refinement against the reference
+    lk_sigma = (lk_window * fwhm[0] / 2.355, lk_window * fwhm[1] / 2.355)
     tissue_key = None                          # the same pixels on the reference's grid
     steps = range(1, t_count)
     if progress:
@@ -393,6 +437,14 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
             current = np.where(replace, moved, current)
         # register frame t directly to the reference, starting from the previous estimate
         v = flow(reference_u8, current, v)
+        if lk_iterations > 0:
+            # Farnebäck's polynomial model of the speckle leaves a bias where the tissue is
+            # strained; Gauss–Newton on the speckle itself removes most of it
+            if lk is None:
+                lk = LucasKanade(reference, lk_sigma)
+            moving = current.astype(np.float32) * np.float32(1.0 / 255.0)
+            for _ in range(lk_iterations):
+                v = lk.refine(moving, v, gx, gy)
         ahead_x, ahead_y = gx + v[..., 0], gy + v[..., 1]
         weight = np.clip(local_ncc(reference, _remap(frames[t], ahead_x, ahead_y)), 0.0, 1.0)
         weight *= weight
@@ -425,6 +477,7 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
             # frame 0's tissue pixels seen from the new reference (X ≈ Y − u(Y))
             tissue_key = _remap_mask(textured, gx - u_key[..., 0], gy - u_key[..., 1])
             covered_key, reference, reference_u8 = covered, frames[t], frames_u8[t]
+            lk = None
     row, col = spacing
     out *= np.array([col, row], np.float32)
     out[:, solid0] = np.nan
