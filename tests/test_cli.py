@@ -185,3 +185,14 @@ def test_track_follows_the_twins_target_and_writes_its_fields(small_twin, tmp_pa
     assert summary["frames"] == len(result.frames) and summary["material_points"]["interior"] > 10
     # the bar's tracked push goes the way the bar points (down)
     assert summary["bar_shift_mm"][-1][1] < 0
+
+
+def test_a_closed_pipe_is_not_an_error():
+    """``hifumotion … --help | head -1``: the reader goes away early; no traceback, no error."""
+    proc = subprocess.Popen([sys.executable, "-m", "hifumotion", "track", "--help"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.read(10)
+    proc.stdout.close()                    # the reader has seen enough
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=60)
+    assert "Traceback" not in err and "error" not in err.lower(), err

@@ -43,6 +43,27 @@ def _os_error(exc: OSError) -> str:
     return f"{where}: {reason}" if where else reason
 
 
+def _stdout_broken() -> bool:
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return True
+    except (OSError, ValueError):
+        return False
+    return False
+
+
+def _quiet_stdout() -> None:
+    """Point standard output at /dev/null, so the interpreter's last flush does not fail again."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+
+
 def main(argv: Optional[list[str]] = None) -> None:
     """Console-script entry point: run the app; user errors become one line and exit status 2."""
     from rich.text import Text
@@ -61,6 +82,8 @@ def main(argv: Optional[list[str]] = None) -> None:
                               soft_wrap=True)
         sys.exit(status)
 
+    # Typer's own copy of Click has no Abort (it raises KeyboardInterrupt or exits instead)
+    abort = getattr(click.exceptions, "Abort", None) or getattr(click, "Abort", None) or KeyboardInterrupt
     _register_commands()
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
@@ -76,12 +99,20 @@ def main(argv: Optional[list[str]] = None) -> None:
         fail(exc.format_message())
     except HifuError as exc:
         fail(str(exc))
+    except BrokenPipeError:
+        _quiet_stdout()   # the reader went away (``hifumotion … | head``): nothing more to say
+        sys.exit(0)
     except MemoryError:
         fail("out of memory: the input or the settings ask for more memory than this machine has; "
              "use a coarser resolution or a smaller input")
     except OSError as exc:
         fail(_os_error(exc))
-    except (KeyboardInterrupt, click.exceptions.Abort):
+    except SystemExit:
+        if _stdout_broken():
+            _quiet_stdout()
+            sys.exit(0)
+        raise
+    except (KeyboardInterrupt, abort):
         console.console.print("interrupted; nothing was written", highlight=False)
         sys.exit(130)
     finally:

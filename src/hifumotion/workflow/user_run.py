@@ -69,7 +69,7 @@ class RunConfig(ConfigModel):
     bar: BarSetup
     push: PushSchedule = Field(default_factory=PushSchedule, description="the shape of the push's force schedule")
     estimation: EstimationConfig = EstimationConfig()
-    training_contours: Path | None = Field(None, description="CSV of expert contours of training frames (frame, x_px, y_px), used instead of GLCV tracking")
+    training_contours: Path | None = Field(None, description="CSV of expert contours of training frames (frame, x_px, y_px), used instead of the tracked contours")
     truth: TruthConfig = TruthConfig()
 
     @model_validator(mode="after")
