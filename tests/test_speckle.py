@@ -245,3 +245,17 @@ def test_the_plane_fill_carries_a_linear_field_into_a_gap():
     out = linear_fill(damaged, weight, gap, 6.0)
     assert np.abs(out[gap] - field[gap]).max() < 0.01     # the gradient (0.16 across the gap) is kept
     assert np.array_equal(out[~gap], damaged[~gap])
+
+
+def test_a_setup_whose_bar_lies_on_dark_pixels_is_refused():
+    from hifumotion.errors import InputError
+    from hifumotion.observed.solids import Solids, check_bar_in_image
+
+    frame = np.zeros((40, 40), np.float32)
+    frame[25:35, 10:30] = 1.0                          # the bar's echo
+    bar = np.zeros((40, 40), bool)
+    floor = np.zeros((40, 40), bool)
+    bar[25:35, 10:30] = True
+    check_bar_in_image(frame, Solids(floor, bar), "setup.json")          # where the image has it: fine
+    with pytest.raises(InputError, match="setup.json.*dark"):
+        check_bar_in_image(frame, Solids(floor, np.roll(bar, -20, axis=0)), "setup.json")

@@ -13,22 +13,24 @@ from hifumotion.console import console, log
 from hifumotion.errors import InputError
 
 
-def _solids_from_files(setup: Optional[Path], exclude: Optional[Path], bar: Optional[Path], shape):
+def _solids_from_files(setup: Optional[Path], exclude: Optional[Path], bar: Optional[Path], frame0: np.ndarray):
     """The known solids: from a setup.json (floor and resting bar on the imaging plane) and/or
     mask PNGs (static exclusion, a rigid instrument)."""
     from hifumotion.io import read_mask
     from hifumotion.observed.solids import Solids
 
+    shape = frame0.shape
     floor = np.zeros(shape, bool)
     rigid = np.zeros(shape, bool)
     if setup is not None:
         from hifumotion.observed.setup import read_setup
-        from hifumotion.observed.solids import imaging_plane, known_solids
+        from hifumotion.observed.solids import check_bar_in_image, imaging_plane, known_solids
 
         s = read_setup(setup)
         if tuple(s.imaging.image_shape) != tuple(shape):
             raise InputError(f"describes {tuple(s.imaging.image_shape)} images, the cine has {tuple(shape)}", setup)
         known = known_solids(imaging_plane(s), s)
+        check_bar_in_image(frame0, known, setup)
         floor |= known.floor
         rigid |= known.bar
     for path, target in ((exclude, floor), (bar, rigid)):
@@ -90,7 +92,7 @@ def track(
         raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
     start = load_init(init, cine, None, None, seq.shape)
     check_init(start, seq.shape, str(init))
-    solids = _solids_from_files(setup, exclude, bar, seq.shape)
+    solids = _solids_from_files(setup, exclude, bar, seq.frames[0])
     record = RunRecord("track", config={"source": str(source), "init": str(init), "setup": None if setup is None else str(setup),
                                         "exclude": None if exclude is None else str(exclude),
                                         "bar": None if bar is None else str(bar), "method": method,

@@ -79,7 +79,9 @@ class Observation:
     @property
     def frame_plane(self) -> Plane:
         """The time series' imaging plane in the tank frame."""
-        return _plane_at(self.offset_mm, self.observed, self.observed.setup.imaging.frames_plane_z_mm)
+        from hifumotion.observed.solids import imaging_plane
+
+        return imaging_plane(self.observed.setup)
 
     def reference_shape(self):
         """The frame-0 shape the predictions carry: the frame-0 mask in the imaging plane,
@@ -98,12 +100,6 @@ class Observation:
 #: Margin (mm) around the resting bar whose pixels the sweep's segmentation may not enter (the
 #: bar's blur; the time series measures the blur instead, :func:`~hifumotion.speckle.segment_target`).
 BAR_MARGIN_MM = 0.5
-
-
-def _plane_at(origin_mm: np.ndarray, observed: Observed, z_mm: float) -> Plane:
-    im = observed.setup.imaging
-    return Plane((float(origin_mm[0]), float(origin_mm[1]), float(z_mm)), im.column_axis, im.row_axis,
-                 tuple(observed.frames.shape[1:]), observed.pixel_mm)
 
 
 def read_user_contours(path: str | Path, observed: Observed) -> dict[int, np.ndarray]:
@@ -125,9 +121,11 @@ def read_user_contours(path: str | Path, observed: Observed) -> dict[int, np.nda
 
 def frame_solids(observed: Observed):
     """The known solids (:class:`~hifumotion.observed.solids.Solids`) on the time series' plane."""
-    from hifumotion.observed.solids import imaging_plane, known_solids
+    from hifumotion.observed.solids import check_bar_in_image, imaging_plane, known_solids
 
-    return known_solids(imaging_plane(observed.setup), observed.setup)
+    solids = known_solids(imaging_plane(observed.setup), observed.setup)
+    check_bar_in_image(observed.frames[0], solids, "setup.json")
+    return solids
 
 
 def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
@@ -150,7 +148,7 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     px = observed.pixel_mm
     init = observed.initial_contour
 
-    from hifumotion.observed.solids import known_solids
+    from hifumotion.observed.solids import imaging_plane, known_solids
 
     if tracking not in ("speckle", "glcv"):
         raise InputError(f"unknown tracking {tracking!r}; expected speckle or glcv", "tracking")
@@ -158,7 +156,7 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     start = int(np.argmin(np.abs(observed.sweep_z_mm - z_frames)))
     # what the operator knows cannot be tissue: the floor, and the bar where it rests
     def solid(z):
-        return known_solids(_plane_at(offset, observed, z), observed.setup, BAR_MARGIN_MM).any
+        return known_solids(imaging_plane(observed.setup, z), observed.setup, BAR_MARGIN_MM).any
 
     exclude = np.stack([solid(z) for z in observed.sweep_z_mm])
     sweep = segment_sweep(observed.sweep, init, start, method, spacing=px, exclude=exclude)

@@ -60,16 +60,15 @@ def true_motion(positions_mm: np.ndarray, spacing_mm: float, setup: Setup, masks
 
 def read_true_motion(twin_folder: str | Path) -> TrueMotion:
     """:func:`true_motion` of a twin folder (``observed/setup.json``, ``truth/tissue_trajectory.npz``,
-    ``truth/frames.nii.gz``)."""
-    import SimpleITK as sitk
-
+    ``truth/frames/frame_NNNN.png``)."""
     from hifumotion.observed.setup import read_setup
+    from hifumotion.scoring import read_frame_masks
 
     folder = Path(twin_folder)
     setup = read_setup(folder / "observed" / "setup.json")
     traj = np.load(folder / "truth" / "tissue_trajectory.npz")
-    masks = sitk.GetArrayFromImage(sitk.ReadImage(str(folder / "truth" / "frames.nii.gz"))) > 0
-    masks = masks.reshape(-1, *masks.shape[-2:])   # 2D+t is stored (T, 1, H, W)
+    by_frame = read_frame_masks(folder / "truth")
+    masks = np.stack([by_frame[k] for k in sorted(by_frame)])
     return true_motion(traj["positions_mm"], float(traj["spacing_mm"]), setup, masks)
 
 

@@ -59,6 +59,22 @@ def known_solids(plane: Plane, setup: Setup, bar_margin_mm: float = 0.0) -> Soli
     return Solids(floor, bar & ~floor)
 
 
+def check_bar_in_image(frame: np.ndarray, solids: Solids, where) -> None:
+    """Raise :class:`~hifumotion.errors.InputError` naming ``where`` when the resting bar the
+    setup places in the image lies mostly on dark pixels of ``frame`` (a metal bar echoes
+    brightly): the setup is not this cine's, or its geometry is off."""
+    from hifumotion.errors import InputError
+
+    if not solids.bar.any():
+        return
+    img = np.asarray(frame, np.float32)
+    bright = float((img[solids.bar] > np.median(img)).mean())
+    if bright < 0.5:
+        raise InputError(f"places the resting bar where frame 0 is dark ({100 * bright:.0f} % of its pixels "
+                         "brighter than the image's median; a bar echoes brightly): is this the setup of this "
+                         "cine, with the right image origin and bar tip?", where)
+
+
 def measure_bloom_px(image: np.ndarray, solid: np.ndarray, level: float, speckle_fwhm_px: tuple[float, float],
                      limit_px: int = 40) -> tuple[int, int]:
     """How far (px, ``(rows, cols)``) a solid's echo stays brighter than ``level`` beyond its surface.
@@ -112,4 +128,4 @@ def bloom_mask(solid: np.ndarray, bloom_px: tuple[int, int]) -> np.ndarray:
     return cv2.dilate(np.asarray(solid, np.uint8), kernel).astype(bool)
 
 
-__all__ = ["Solids", "imaging_plane", "known_solids", "measure_bloom_px", "bloom_mask"]
+__all__ = ["Solids", "check_bar_in_image", "imaging_plane", "known_solids", "measure_bloom_px", "bloom_mask"]

@@ -33,7 +33,7 @@ import numpy as np
 
 from hifumotion.errors import InputError
 from hifumotion.sequence import as_spacing_mm
-from hifumotion.speckle._flow import estimator as flow_estimator
+from hifumotion.speckle._flow import _u8, estimator as flow_estimator
 
 #: Side of the window (px) of the local normalised cross-correlation that grades each pixel.
 QUALITY_WINDOW_PX = 9
@@ -407,7 +407,7 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     rigid_path = np.zeros((t_count, 2), np.float32)
     key = 0                                    # the reference frame
     covered_key, _ = solids_at(np.zeros(2))    # the solids (and their bloom) in the reference
-    frames_u8 = np.clip(np.rint(frames * 255.0), 0, 255).astype(np.uint8)   # what the flow reads, once
+    frames_u8 = _u8(frames)                    # what the flow reads, converted once
     reference = frames[0]
     reference_u8 = frames_u8[0]
     u_key = np.zeros((h, w, 2), np.float32)    # frame 0 → reference (frame-0 grid)
@@ -448,10 +448,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         ahead_x, ahead_y = gx + v[..., 0], gy + v[..., 1]
         weight = np.clip(local_ncc(reference, _remap(frames[t], ahead_x, ahead_y)), 0.0, 1.0)
         weight *= weight
-        hidden = None
-        if any_solid:
-            hidden = _remap_mask(covered, ahead_x, ahead_y)
-            weight[hidden | covered_key] = 0.0
+        if any_solid:   # the material now under a solid, and the reference's own solids
+            weight[_remap_mask(covered, ahead_x, ahead_y) | covered_key] = 0.0
         if smoothing > 0:
             v = normalized_convolution(v, weight, sigma)
             if fill == "plane" and rigid is not None and tissue_key is not None:

@@ -213,6 +213,8 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
         series = track_speckle(frames, spacing_mm, exclude=None if solids is None else solids.floor,
                                rigid=None if solids is None else solids.bar, progress=progress)
     contours, masks, quality = [], [], []
+    # the water's grey level, for the solids in a refined frame (frame 0 away from target and solids)
+    background = float(np.median(frames[0][~first.mask & ~first.excluded])) if refine_iterations > 0 else 0.0
     seconds = np.array(series.seconds_per_frame, float)
     seconds[0] += first_s
     for t in range(frames.shape[0]):
@@ -231,7 +233,6 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
                     row, col = series.spacing_mm
                     bar = _shifted(bar, series.rigid_shift_mm[t] / np.array([col, row]))
                 excluded = solids.floor | bloom_mask(bar, first.bloom_px)
-            background = float(np.median(frames[0][~first.mask & ~first.excluded]))
             mask = refine_in_band(frames[t], mask, excluded, background, refine_band_px, refine_iterations,
                                   method, spacing_mm, boundary_offset_mm, params)
         masks.append(mask)
