@@ -11,7 +11,9 @@
   imaging plane (tank mm).
 
 :func:`run_model` simulates the scene with a :class:`Parameters` set K — settling
-under gravity, then the push — and returns where the points A have moved at every
+under gravity, then the push; by default on the fast path (:mod:`hifumotion.creep`:
+the reconstructed tissue as conforming voxels, contacts as constraints, backward
+Euler), ``ModelSettings.integrator = "explicit"`` for the paper's Eq. 8–20 — and returns where the points A have moved at every
 frame (their displacement since frame 0, interpolated from the tissue particles,
 :func:`~hifumotion.particles.section.displacement_at`), and, if asked, the tissue
 particles of chosen frames.
@@ -68,6 +70,7 @@ class ModelSettings:
     tissue_density_kg_m3: float = 1050.0
     rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s); a regularisation, not fitted
     contour_points: int = 64            # size of the point set A
+    integrator: str = "implicit"        # "implicit": the fast path (hifumotion.creep); "explicit": Eq. 8–20 as the paper
 
 
 @dataclass
@@ -80,6 +83,22 @@ class ModelSpec:
     points_mm: np.ndarray           # (M, 3) the contour points A on the frame-0 contour
     frame_interval_s: float
     settings: ModelSettings = field(default_factory=ModelSettings)
+    surface_vertices_mm: np.ndarray | None = None   # the reconstructed surface, moved as the particles were
+    surface_faces: np.ndarray | None = None
+    _voxels: object = field(default=None, repr=False, compare=False)  # the fast path's mesh, made once
+
+    def voxels(self):
+        """The fast path's conforming voxel mesh of the tissue (made on first use, then kept)."""
+        if self._voxels is None:
+            import trimesh
+
+            from hifumotion.creep.voxels import conform, voxel_mesh
+
+            mesh = voxel_mesh(self.tissue_mm, self.spacing_mm)
+            if self.surface_vertices_mm is not None:
+                mesh = conform(mesh, trimesh.Trimesh(self.surface_vertices_mm, self.surface_faces, process=False))
+            self._voxels = mesh
+        return self._voxels
 
     @property
     def spacing_mm(self) -> float:
@@ -122,7 +141,9 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     dx, (tissue, volume) = spacing_for_count(fill, (rec.volume_mm3 / s.tissue_particles) ** (1 / 3),
                                              s.tissue_particles)
     # on the floor: the lowest layer half a spacing up (a gap would make the tissue fall into the push)
-    tissue[:, 1] -= tissue[:, 1].min() - 0.5 * dx
+    lift = tissue[:, 1].min() - 0.5 * dx
+    tissue[:, 1] -= lift
+    surface = np.asarray(rec.mesh.vertices, float) + observation.offset_mm - np.array([0.0, lift, 0.0])
     b = setup.bar
     axis = np.asarray(b.direction, float)
     # the reconstructed surface is not exactly where the real one was: the tip touches the model's
@@ -143,7 +164,8 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     contour = Contour.from_mask(observation.frame_masks[0], observation.pixel_mm)
     px = resample_closed(contour.points_px, count=s.contour_points)
     points = _plane_points(observation.frame_plane, px)
-    return ModelSpec(scene, tissue, volume, points, observation.observed.frame_interval_s, s)
+    return ModelSpec(scene, tissue, volume, points, observation.observed.frame_interval_s, s,
+                     surface, np.asarray(rec.mesh.faces, np.int64))
 
 
 def _plane_points(plane, xy_px: np.ndarray) -> np.ndarray:
@@ -185,7 +207,15 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -
         raise InputError(f"parameters outside the model's range: {k}", "parameters")
     t0 = time.perf_counter()
     scene = scene_for(spec, k, last_frame)
-    sim = simulate(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3))
+    if spec.settings.integrator == "implicit":
+        from hifumotion.creep.scene import simulate_creep
+
+        sim = simulate_creep(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3), mesh=spec.voxels())
+    elif spec.settings.integrator == "explicit":
+        sim = simulate(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3))
+    else:
+        raise InputError(f"unknown integrator {spec.settings.integrator!r}; expected implicit or explicit",
+                         "integrator")
     rest = sim.tissue_mm[0]
     frames = np.arange(len(sim.times_s))
     points = np.empty((len(frames), len(spec.points_mm), 3))

@@ -1,0 +1,411 @@
+"""The tissue's creep under the bar, integrated implicitly (the fast path; SI inside).
+
+The tissue's motion under a slow push is an overdamped creep: inertia is negligible
+beside the elastic and viscous forces, so the equation of motion
+
+    M ü + C(μ) u̇ + K u = f_body + f_contact                    (Eq. 12–16's forces)
+
+is taken by **backward Euler** with the displacement at the end of the step unknown,
+
+    (M/Δt² + C/Δt + K) u₊ = f_body + M/Δt² (u + Δt u̇) + C/Δt u + f_contact,
+
+``K`` the small-strain elasticity and ``C`` the Kelvin–Voigt viscosity of
+:mod:`.hexahedra` (μ per voxel from the previous step's shear rate, Eq. 16: one Picard
+step, as the explicit path's implicit viscosity), ``M`` the lumped real mass (no mass
+scaling: it only keeps a frictionless body's rigid modes well posed). Contacts are
+constraints (:mod:`.contact`), eliminated from the system: each step solves the
+symmetric positive-definite reduced system once per round of the active-set rules.
+
+Steps adapt to the motion: the local error of backward Euler, ``½ Δt |u̇₊ − u̇|``, is
+held near ``tolerance`` × Δx by doubling or halving the step (a ladder of sizes, so the
+factorisation is reused while the size and the contact set hold; in between, conjugate
+gradients preconditioned by the last factorisation absorb the change of μ). Steps land
+on the force schedule's breakpoints; output frames are interpolated linearly between
+the steps around them.
+
+Water: the fast path carries it as buoyancy — each submerged voxel weighs
+``(ρ − ρ_w) g V`` — and no drag (the hydrostatic pressure on a submerged surface sums
+to exactly that force; its uniform compression ρ_w g h / K is below 10⁻³ here).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from hifumotion.creep.contact import SLIP, STICK, ContactSet, Plane, Punch
+from hifumotion.creep.hexahedra import MeshMatrices
+from hifumotion.creep.linear import Factor, preconditioned_cg
+from hifumotion.creep.voxels import VoxelMesh
+from hifumotion.errors import InputError
+
+MM = 1e-3
+#: Settling steps (s): from a millisecond, where inertia dominates a 1 mm voxel's stiffness,
+#: to static equilibrium (M/Δt² below 10⁻⁸ of K).
+SETTLE_STEPS_S = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 1e3)
+
+
+@dataclass(frozen=True)
+class CreepMaterial:
+    """The tissue (SI): Table 3's E, ν, β1, β2 and the regularisations of Eq. 16's μ."""
+
+    youngs_modulus_pa: float
+    poisson_ratio: float
+    beta1: float = 1.0
+    beta2: float = 0.5
+    density_kg_m3: float = 1050.0
+    rate_floor_per_s: float = 1e-3
+    mu_max_pa_s: float = 1e7
+
+    def lame(self) -> tuple[float, float]:
+        """(λ, G) in Pa."""
+        e, nu = self.youngs_modulus_pa, self.poisson_ratio
+        if not e > 0:
+            raise InputError(f"Young's modulus must be > 0 Pa, got {e}", "youngs_modulus_pa")
+        if not -1.0 < nu < 0.5:
+            raise InputError(f"Poisson's ratio must be in (−1, 0.5), got {nu}", "poisson_ratio")
+        return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+
+    def viscosity(self, rate_per_s: np.ndarray) -> np.ndarray:
+        """Eq. 16's μ = β1 max(γ̇, floor)^β2 (Pa·s), capped at ``mu_max_pa_s``."""
+        rate = np.maximum(rate_per_s, self.rate_floor_per_s)
+        return np.minimum(self.beta1 * rate ** self.beta2, self.mu_max_pa_s)
+
+
+@dataclass(frozen=True)
+class Surroundings:
+    """Gravity (m/s², a vector) and the water the tissue sits in (none when ``water_line_m`` is None)."""
+
+    gravity_m_s2: tuple[float, float, float] = (0.0, -9.80665, 0.0)
+    water_density_kg_m3: float = 1000.0
+    water_line_m: float | None = None
+    up: int = 1  # the axis along which the water line is measured
+
+
+@dataclass
+class CreepSettings:
+    """Numerical settings of the fast path.
+
+    Attributes
+    ----------
+    tolerance
+        Local error of a step (backward Euler's ½ Δt |Δu̇|), in particle spacings.
+    first_step_s, max_step_s
+        The first step and the largest one (s); the first defaults to the output interval / 4.
+    contact_tolerance
+        A free node closer than this many spacings *behind* a surface is put in contact.
+    max_rounds
+        Rounds of the active-set rules per step.
+    cg_iterations, cg_rtol
+        Conjugate-gradient budget before a fresh factorisation, and its relative residual.
+    solver
+        ``"pardiso"``, ``"superlu"`` or None (the best installed).
+    """
+
+    tolerance: float = 0.005
+    first_step_s: float | None = None
+    max_step_s: float = 1.0
+    contact_tolerance: float = 1e-4
+    max_rounds: int = 30
+    cg_iterations: int = 12
+    cg_rtol: float = 1e-9
+    solver: str | None = None
+
+
+@dataclass
+class CreepResult:
+    """The fast path's output (mm, s).
+
+    ``nodes_mm`` and ``particles_mm`` are ``(frames, ·, 3)`` positions of the voxel
+    corners and of the particles (voxel centres); ``advance_mm`` the bar's advance along
+    its axis since t = 0 (frame 0 is the settled state); ``bar_force_n`` the force the
+    tissue took at each frame; ``stats`` counts steps, factorisations, solves, the worst
+    penetration of any surface (mm) and the wall time (s).
+    """
+
+    times_s: np.ndarray
+    nodes_mm: np.ndarray
+    particles_mm: np.ndarray
+    advance_mm: np.ndarray
+    bar_force_n: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+
+class CreepSolver:
+    """Backward-Euler creep of a voxel mesh with contact constraints (module docstring)."""
+
+    def __init__(self, mesh: VoxelMesh, material: CreepMaterial, surroundings: Surroundings,
+                 planes: list[Plane], punch: Punch | None, settings: CreepSettings | None = None):
+        self.mesh = mesh
+        self.material = material
+        self.settings = settings or CreepSettings()
+        self.dx_m = mesh.spacing_mm * MM
+        self.rest_m = mesh.nodes_mm * MM
+        n = mesh.n_nodes
+        lam, g = material.lame()
+        try:
+            self.matrices = MeshMatrices(self.rest_m, mesh.elements, self.dx_m)
+        except ValueError as exc:
+            raise InputError(str(exc), "tissue mesh") from None
+        self.assembly = self.matrices.assembly
+        self.k_data = self.matrices.matrix(2 * g, lam + 2 * g / 3, 0.0).data
+        rows = np.repeat(np.arange(self.assembly.size), np.diff(self.assembly.indptr))
+        # a spring of 10⁻¹⁰ of the mean stiffness ties every node to its rest place: a body on
+        # frictionless contacts keeps a well-posed system when Δt is long (M/Δt² → 0); it moves
+        # nothing measurable (the bar's force balance holds to 10⁻⁹)
+        self.anchor_stiffness = 1e-10 * float(np.abs(self.k_data[rows == self.assembly.indices]).mean())
+        volume = self.dx_m ** 3
+        mass_e = np.full(len(mesh.elements), material.density_kg_m3 * volume)
+        self.mass = np.zeros(n)
+        np.add.at(self.mass, mesh.elements.ravel(), np.repeat(mass_e / 8.0, 8))
+        weight = np.full(len(mesh.elements), material.density_kg_m3 * volume)
+        if surroundings.water_line_m is not None:
+            wet = mesh.centres_mm[:, surroundings.up] * MM < surroundings.water_line_m
+            weight = weight - wet * surroundings.water_density_kg_m3 * volume
+        self.body_force = np.zeros((n, 3))
+        grav = np.asarray(surroundings.gravity_m_s2, float)
+        for c in range(3):
+            np.add.at(self.body_force[:, c], mesh.elements.ravel(), np.repeat(weight * grav[c] / 8.0, 8))
+        self.diag_index = np.flatnonzero(rows == self.assembly.indices)
+        self.contacts = ContactSet(self.rest_m, planes, punch)
+        self.punch = punch
+        self.advance_m = 0.0
+        self._factor: Factor | None = None
+        self._factor_key = None
+        self._reduction_key = None
+        self.stats = {"steps": 0, "rejected": 0, "factorisations": 0, "solves": 0, "cg_iterations": 0,
+                      "rounds": 0, "max_penetration_mm": 0.0}
+
+    # -- the linear system ------------------------------------------------------------
+    def _matrices(self, dt: float, mu: np.ndarray | None) -> tuple[sp.csr_matrix, sp.csr_matrix | None]:
+        """``A = K + C/Δt + M/Δt²`` and ``C/Δt`` (None without viscosity), on one CSR pattern."""
+        asm = self.assembly
+        data = self.k_data.copy()
+        c = None
+        if mu is not None and self.material.beta1 > 0:
+            c = self.matrices.matrix(0.0, 0.0, mu / dt)
+            data += c.data
+        data[self.diag_index] += np.repeat(self.mass, 3) / dt ** 2 + self.anchor_stiffness
+        return sp.csr_matrix((data, asm.indices, asm.indptr), shape=(asm.size, asm.size)), c
+
+    def _reduction(self):
+        """``u = T q + g (+ s column)`` for the current contact set (cached by its version)."""
+        key = self.contacts.version
+        if self._reduction_key == key:
+            return self._t, self._g_const, self._s_col
+        cs = self.contacts
+        n = len(self.rest_m)
+        rows, cols, vals = [], [], []
+        g = np.zeros((n, 3))
+        free = np.flatnonzero(cs.body < 0)
+        col = 0
+        rows.append((3 * free[:, None] + np.arange(3)).ravel())
+        cols.append(np.arange(3 * len(free)))
+        vals.append(np.ones(3 * len(free)))
+        col = 3 * len(free)
+        contact = np.flatnonzero(cs.body >= 0)
+        s_col = -1
+        if len(contact):
+            frames = cs.frames_of(contact)
+            const, coef = cs.prescribed_normal(contact)
+            g[contact] += const[:, None] * frames[:, 0]
+            stick = cs.status[contact] == STICK
+            held = np.einsum("nk,nak->na", cs.anchor[contact], frames[:, 1:])
+            g[contact[stick]] += np.einsum("na,nak->nk", held[stick], frames[stick, 1:])
+            slip = np.flatnonzero(cs.status[contact] == SLIP)
+            for a in (1, 2):
+                rows.append((3 * contact[slip][:, None] + np.arange(3)).ravel())
+                cols.append(np.repeat(col + np.arange(len(slip)), 3))
+                vals.append(frames[slip, a].ravel())
+                col += len(slip)
+            on_punch = np.flatnonzero(coef != 0)
+            if len(on_punch):
+                s_col = col
+                rows.append((3 * contact[on_punch][:, None] + np.arange(3)).ravel())
+                cols.append(np.full(3 * len(on_punch), s_col))
+                vals.append(frames[on_punch, 0].ravel())
+                col += 1
+        t = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(3 * n, col))
+        self._t, self._g_const, self._s_col = t, g.ravel(), s_col
+        self._reduction_key = key
+        return self._t, self._g_const, self._s_col
+
+    def _solve(self, a: sp.csr_matrix, rhs: np.ndarray, force_n: float, key, guess: np.ndarray | None):
+        t, g, s_col = self._reduction()
+        rhs_q = t.T @ (rhs - a @ g)
+        if s_col >= 0:
+            rhs_q[s_col] += force_n
+        self.stats["solves"] += 1
+        x0 = None if guess is None else t.T @ (guess - g)  # T has orthonormal columns but the s column
+        if s_col >= 0 and guess is not None:
+            x0[s_col] = self.advance_m
+        full_key = (self.contacts.version, key)
+        if self._factor is not None and self._factor_key == full_key and x0 is not None:
+            def apply(q):
+                return t.T @ (a @ (t @ q))
+            q, its, ok = preconditioned_cg(apply, rhs_q, self._factor, x0, self.settings.cg_rtol,
+                                           self.settings.cg_iterations)
+            self.stats["cg_iterations"] += its
+            if ok:
+                return t @ q + g, (q[s_col] if s_col >= 0 else None)
+        reduced = (t.T @ a @ t).tocsr()
+        if self._factor is not None:
+            self._factor.release()
+        self._factor = Factor(reduced, self.settings.solver)
+        self._factor_key = full_key
+        self.stats["factorisations"] += 1
+        q = self._factor.solve(rhs_q)
+        return t @ q + g, (q[s_col] if s_col >= 0 else None)
+
+    # -- one step ---------------------------------------------------------------------
+    def _engage_punch(self, u: np.ndarray, force_n: float) -> None:
+        """A pushed bar with nothing under it advances until it touches (quasi-static)."""
+        cs = self.contacts
+        if self.punch is None or force_n <= 0 or np.any(cs.body == cs.punch_index):
+            return
+        gap, which = cs.gaps(u, self.advance_m)
+        under = np.flatnonzero(which == cs.punch_index)
+        if len(under) == 0:
+            raise InputError("the bar's end face has no tissue under it", "bar")
+        reach = float(gap[under].min())
+        self.advance_m += reach
+        # every node the face reaches together (a flat top meets it all at once)
+        first = under[gap[under] <= reach + self.settings.contact_tolerance * self.dx_m]
+        cs.touch(first, np.full(len(first), cs.punch_index), u)
+
+    def step(self, u: np.ndarray, v: np.ndarray, t_new: float, dt: float, mu: np.ndarray | None,
+             key) -> tuple[np.ndarray, float]:
+        """Displacement (m, (n, 3)) at ``t_new`` after a step ``dt`` from (u, v); the bar's force taken."""
+        force = float(self.punch.force_n(t_new)) if self.punch is not None else 0.0
+        a, c = self._matrices(dt, mu)
+        base = self.body_force.ravel() + np.repeat(self.mass, 3) / dt ** 2 * (u + dt * v).ravel()
+        if c is not None:
+            base += c @ u.ravel()
+        self._engage_punch(u, force)
+        guess = (u + dt * v).ravel()
+        cs = self.contacts
+        tol = self.settings.contact_tolerance * self.dx_m
+        for round_ in range(self.settings.max_rounds):
+            self.stats["rounds"] += 1
+            rhs = base.copy()
+            slip = np.flatnonzero(cs.status == SLIP)
+            if len(slip):
+                mu_f = cs.friction[cs.body[slip]]
+                friction = (mu_f * cs.pressure[slip])[:, None] * cs.direction[slip]
+                rhs.reshape(-1, 3)[slip] += friction
+            new, s = self._solve(a, rhs, force, key, guess)
+            if s is not None:
+                self.advance_m = float(s)
+            reaction = (a @ new - rhs).reshape(-1, 3)
+            unew = new.reshape(-1, 3)
+            old_pressure = cs.pressure[slip].copy()
+            changed = cs.update(unew, u, reaction, self.advance_m, tol, restick=round_ == 0)
+            if self.punch is not None and force > 0 and not np.any(cs.body == cs.punch_index):
+                self._engage_punch(unew, force)
+                changed = True
+            settled_friction = (len(slip) == 0 or np.allclose(cs.pressure[slip], old_pressure, rtol=1e-6,
+                                                                atol=1e-12 * max(force, 1e-30)))
+            guess = new
+            if not changed and settled_friction:
+                break
+        gap, which = cs.gaps(unew, self.advance_m)
+        touching = cs.body >= 0
+        worst = float(np.max(-gap[~touching], initial=0.0)) / MM
+        self.stats["max_penetration_mm"] = max(self.stats["max_penetration_mm"], worst)
+        taken = float(cs.pressure[cs.body == cs.punch_index].sum()) if self.punch is not None else 0.0
+        return unew, taken
+
+    # -- the run ----------------------------------------------------------------------
+    def run(self, output_times_s: np.ndarray, progress: Callable[[float], None] | None = None) -> CreepResult:
+        """Settle under gravity (the bar at F(0)), then push; positions at ``output_times_s`` (≥ 0)."""
+        started = time.perf_counter()
+        times = np.asarray(output_times_s, float)
+        if times.ndim != 1 or len(times) == 0 or np.any(np.diff(times) <= 0) or times[0] < 0:
+            raise InputError("output times must be increasing and ≥ 0 s", "output_times_s")
+        n = len(self.rest_m)
+        st = self.settings
+        cs = self.contacts
+        # resting: the nodes on a surface start stuck to it
+        gap, which = cs.gaps(np.zeros((n, 3)), 0.0)
+        resting = np.flatnonzero((which >= 0) & (which < cs.punch_index) & (gap <= st.contact_tolerance * self.dx_m))
+        cs.touch(resting, which[resting], np.zeros((n, 3)))
+        # settled state: the tissue let down onto the floor by quiet steps of growing length
+        # (each from rest: inertia keeps a body that touches at a point well posed until its
+        # contact patch has formed), then static equilibrium under gravity, no viscosity
+        u = np.zeros((n, 3))
+        for k, dt_settle in enumerate(SETTLE_STEPS_S):
+            u, _ = self.step(u, np.zeros((n, 3)), 0.0, dt_settle, None, ("settle", k))
+        v = np.zeros((n, 3))
+        t = 0.0
+        interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)
+        base = st.first_step_s or interval / 4.0
+        level = 0
+        breaks = sorted(b for b in (self.punch.breakpoints_s if self.punch else ()) if b > 0) + [times[-1]]
+        saved_t, saved_u, saved_adv, saved_force = [0.0], [u.copy()], [self.advance_m], [0.0]
+        mu = None
+        rate = np.zeros(len(self.mesh.elements))
+        calm = 0
+        while t < times[-1] - 1e-12:
+            dt = min(base * 2.0 ** level, st.max_step_s)
+            nxt = next(b for b in breaks if b > t + 1e-12)
+            landing = t + dt >= nxt - 1e-9 * dt
+            if landing:
+                dt = nxt - t
+            mu = self.material.viscosity(rate)
+            adv0 = self.advance_m
+            version0 = cs.version
+            state = (cs.body.copy(), cs.status.copy(), cs.anchor.copy(), cs.direction.copy(), cs.pressure.copy())
+            unew, taken = self.step(u, v, t + dt, dt, mu, round(dt, 12))
+            vnew = (unew - u) / dt
+            err = 0.5 * dt * np.abs(vnew - v).max()
+            if err > 2.0 * st.tolerance * self.dx_m and dt > 1e-6 * base and not (t == 0.0 and level < -12):
+                # reject: restore the contact state and halve
+                self.stats["rejected"] += 1
+                changed = cs.version != version0
+                cs.body, cs.status, cs.anchor, cs.direction, cs.pressure = state
+                if changed:  # the set the factorisation knew is gone
+                    cs.version += 1
+                self.advance_m = adv0
+                level -= 1
+                calm = 0
+                continue
+            self.stats["steps"] += 1
+            t += dt
+            u, v = unew, vnew
+            rate = self.matrices.rates(v)
+            saved_t.append(t)
+            saved_u.append(u.copy())
+            saved_adv.append(self.advance_m)
+            saved_force.append(taken)
+            calm = calm + 1 if err < 0.25 * st.tolerance * self.dx_m else 0
+            if calm >= 2 and not landing:
+                level += 1
+                calm = 0
+            if progress is not None:
+                progress(min(t / times[-1], 1.0))
+        if self._factor is not None:
+            self._factor.release()
+            self._factor = None
+        st_t = np.array(saved_t)
+        st_u = np.array(saved_u)
+        nodes = np.empty((len(times), n, 3))
+        for k, tk in enumerate(times):
+            j = int(np.clip(np.searchsorted(st_t, tk), 1, len(st_t) - 1))
+            w = 0.0 if st_t[j] == st_t[j - 1] else (tk - st_t[j - 1]) / (st_t[j] - st_t[j - 1])
+            w = min(max(w, 0.0), 1.0)
+            nodes[k] = self.rest_m + (1 - w) * st_u[j - 1] + w * st_u[j]
+        nodes_mm = nodes / MM
+        advance = np.interp(times, st_t, np.array(saved_adv) - saved_adv[0]) / MM
+        force = np.interp(times, st_t, np.array(saved_force))
+        self.stats["seconds"] = time.perf_counter() - started
+        self.stats["advance_at_rest_mm"] = saved_adv[0] / MM
+        parts = np.stack([self.mesh.particles(f) for f in nodes_mm])
+        return CreepResult(times, nodes_mm, parts, advance, force, dict(self.stats))
+
+
+__all__ = ["CreepMaterial", "Surroundings", "CreepSettings", "CreepResult", "CreepSolver"]

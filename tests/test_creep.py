@@ -1,0 +1,147 @@
+"""The fast path (hifumotion.creep): analytic truths, constraints that hold, and the FE reference."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hifumotion.creep import CreepMaterial, CreepSettings, CreepSolver, Plane, Punch, Surroundings, voxel_mesh
+from hifumotion.errors import InputError
+
+MM = 1e-3
+
+
+def block(n: int, dx: float = 1.0) -> np.ndarray:
+    ax = dx * (np.arange(n) + 0.5)
+    return np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), -1).reshape(-1, 3)
+
+
+def pressed_block(n, e, nu, force, beta1=0.0, beta2=0.0, friction=0.0, gravity=(0.0, 0.0, 0.0), density=1e-3,
+                  schedule=None, times=(0.0, 0.5), settings=None):
+    mesh = voxel_mesh(block(n), 1.0)
+    side = n * 1.0
+    punch = None
+    if force is not None:
+        punch = Punch((side / 2 * MM, side * MM, side / 2 * MM), (0.0, -1.0, 0.0), 10 * side * MM,
+                      schedule or (lambda t: force if t > 0 else 0.0), friction)
+    solver = CreepSolver(mesh, CreepMaterial(e, nu, beta1=beta1, beta2=beta2, density_kg_m3=density,
+                                             rate_floor_per_s=1e-12),
+                         Surroundings(gravity), [Plane((0, 0, 0), (0, 1, 0), friction)], punch, settings)
+    return mesh, solver.run(np.asarray(times))
+
+
+def test_uniaxial_compression_gives_youngs_modulus_and_poisson_ratio():
+    # a cube on a frictionless floor under a frictionless punch wider than it: σ = F/A everywhere
+    n, e, nu, force = 5, 8e3, 0.3, 0.02
+    mesh, r = pressed_block(n, e, nu, force)
+    stress = force / (n * MM) ** 2
+    assert r.advance_mm[-1] == pytest.approx(stress / e * n, rel=1e-6)
+    x = r.nodes_mm[-1]
+    left, right = mesh.nodes_mm[:, 0] < 1e-9, mesh.nodes_mm[:, 0] > n - 1e-9
+    width = x[right, 0].mean() - x[left, 0].mean()
+    assert (width - n) / n == pytest.approx(nu * stress / e, rel=1e-4)
+    assert r.bar_force_n[-1] == pytest.approx(force, rel=1e-9)
+
+
+def test_block_under_its_weight_sinks_by_the_analytic_amount_and_not_into_the_floor():
+    # ν = 0: u_top = ρ g H² / (2E), nodally exact for trilinear elements; stuck on a rough floor
+    for n, dx in ((4, 1.0), (8, 0.5)):
+        mesh = voxel_mesh(block(n, dx), dx)
+        rho, g, e = 1000.0, 9.81, 2e3
+        solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho), Surroundings((0, -g, 0)),
+                             [Plane((0, 0, 0), (0, 1, 0), 0.5)], None)
+        r = solver.run(np.array([0.0, 0.1]))
+        h = n * dx * MM
+        top = mesh.nodes_mm[:, 1] > n * dx - 1e-9
+        sag = -(r.nodes_mm[0][top, 1] - mesh.nodes_mm[top, 1]).mean() * MM
+        assert sag == pytest.approx(rho * g * h ** 2 / (2 * e), rel=1e-6)
+        assert r.nodes_mm[:, :, 1].min() >= -1e-9 * dx
+        assert r.stats["max_penetration_mm"] <= 0.01 * dx
+
+
+def test_creep_under_a_held_load_follows_the_kelvin_voigt_law():
+    # ν = 0, β2 = 0 (μ = β1): σ = E ε + 2μ ε̇ uniaxially, so ε(t) = σ/E (1 − exp(−E t / 2μ))
+    n, e, mu, force = 3, 5e3, 2e3, 0.01
+    tau = 2 * mu / e
+    times = np.array([0.0, 0.5, 1.0, 2.0, 4.0]) * tau
+    mesh, r = pressed_block(n, e, 0.0, force, beta1=mu, beta2=0.0, times=times,
+                            settings=CreepSettings(tolerance=0.001))
+    final = force / (n * MM) ** 2 / e * n
+    expected = final * (1 - np.exp(-times / tau))
+    assert np.abs(r.advance_mm - expected).max() <= 0.02 * final
+
+
+def test_the_bar_takes_its_force_and_nothing_crosses_a_surface():
+    from hifumotion.creep.scene import simulate_creep
+    from hifumotion.particles.scene import Scene
+
+    scene = Scene()
+    scene.particles.spacing_mm = 3.0
+    scene.tissue.beta1 = 5e4
+    scene.tissue.rate_floor_per_s = 0.02
+    scene.run.duration_s, scene.run.output_interval_s = 2.0, 0.25
+    sim = simulate_creep(scene)
+    taken = np.asarray(sim.facts["bar_force_n"])
+    schedule = scene.bar.schedule()
+    assert np.allclose(taken[1:], [schedule(t) for t in sim.times_s[1:]], rtol=1e-6)
+    assert sim.facts["creep_max_penetration_mm"] <= 0.01 * scene.particles.spacing_mm
+    descent = sim.tissue_mm[0, :, 1] - sim.tissue_mm[-1, :, 1]
+    assert descent.mean() > 0  # pushed down
+    assert np.all(np.diff(sim.bar_centre_mm[:, 1]) <= 1e-9)  # a push that only grows never lifts the bar
+
+
+def test_fast_path_agrees_with_the_finite_element_reference():
+    import trimesh
+
+    from hifumotion.creep.scene import scene_punch, simulate_creep, tissue_mesh
+    from hifumotion.particles.scene import Scene
+    from hifumotion.reference import PunchedTissue, punch_reference
+
+    scene = Scene()
+    scene.tissue.beta1 = 0.0  # the relaxed limit the reference solves
+    scene.physics.friction = 100.0  # the reference's floor is stuck
+    scene.particles.spacing_mm = 2.0
+    scene.run.duration_s, scene.run.output_interval_s = 1.0, 0.5
+    mesh, _ = tissue_mesh(scene)
+    sim = simulate_creep(scene, mesh=mesh)
+    punch, axis = scene_punch(scene, mesh.centres_mm, 2.0)
+    surface = trimesh.creation.icosphere(subdivisions=3)
+    surface.apply_scale(np.asarray(scene.tissue.size_mm) / 2)
+    surface.apply_translation([25.0, 9.0, 20.0])
+    ref = punch_reference(PunchedTissue(surface.vertices, surface.faces, scene.tissue.youngs_modulus_pa,
+                                        scene.tissue.poisson_ratio, tuple(np.asarray(punch.tip_m) / MM), tuple(axis),
+                                        scene.bar.radius_mm, scene.bar.force_n, max_volume_mm3=8.0))
+    assert ref.force_n == pytest.approx(scene.bar.force_n, rel=1e-3)
+    u_fast = sim.tissue_mm[-1] - mesh.centres_mm
+    u_ref = ref.at(mesh.centres_mm)
+    rms = math.sqrt(((u_fast - u_ref) ** 2).sum(1).mean())
+    # measured 0.09 of the peak at 2 mm (benchmarks/bench_fe_reference.py: it falls as the spacing does)
+    assert rms <= 0.15 * np.linalg.norm(u_ref, axis=1).max()
+
+
+def test_reference_uniaxial_box():
+    import trimesh
+
+    from hifumotion.reference import PunchedTissue, punch_reference
+
+    box = trimesh.creation.box(extents=(10, 10, 10))
+    box.apply_translation((5, 5, 5))
+    box = box.subdivide().subdivide()
+    ref = punch_reference(PunchedTissue(box.vertices, box.faces, 1e4, 0.0, (5, 10, 5), (0, -1, 0), 30.0, 0.05,
+                                        density_kg_m3=1000.0, max_volume_mm3=4.0))
+    assert ref.advance_mm == pytest.approx(0.05 * 10e-3 / (1e4 * 1e-4) / MM, rel=1e-5)
+
+
+def test_bad_input_is_refused_with_a_named_field():
+    with pytest.raises(InputError, match="lattice"):
+        voxel_mesh(np.random.default_rng(0).random((20, 3)), 1.0)
+    with pytest.raises(InputError, match="share"):
+        voxel_mesh(np.zeros((2, 3)), 1.0)
+    mesh = voxel_mesh(block(2), 1.0)
+    with pytest.raises(InputError, match="Poisson"):
+        CreepSolver(mesh, CreepMaterial(1e3, 0.5), Surroundings(), [Plane((0, 0, 0), (0, 1, 0))], None)
+    solver = CreepSolver(mesh, CreepMaterial(1e3, 0.3), Surroundings(), [Plane((0, 0, 0), (0, 1, 0))], None)
+    with pytest.raises(InputError, match="increasing"):
+        solver.run(np.array([1.0, 0.5]))
