@@ -245,7 +245,9 @@ class CreepSolver:
         if s_col >= 0 and guess is not None:
             x0[s_col] = self.advance_m
         full_key = (self.contacts.version, key)
-        if self._factor is not None and self._factor_key == full_key and x0 is not None:
+        # the last factorisation preconditions any matrix of the same contact set: a new μ or
+        # Δt changes values, not the unknowns (a fresh one when CG needs more than its budget)
+        if self._factor is not None and self._factor_key[0] == full_key[0] and x0 is not None:
             def apply(q):
                 return t.T @ (a @ (t @ q))
             q, its, ok = preconditioned_cg(apply, rhs_q, self._factor, x0, self.settings.cg_rtol,
@@ -340,6 +342,13 @@ class CreepSolver:
         u = np.zeros((n, 3))
         for k, dt_settle in enumerate(SETTLE_STEPS_S):
             u, _ = self.step(u, np.zeros((n, 3)), 0.0, dt_settle, None, ("settle", k))
+        if self.punch is not None:
+            # the bar starts resting on the tissue (a gap would be crossed in no time by a
+            # quasi-static push, and its travel counted as motion)
+            gap, which = cs.gaps(u, self.advance_m)
+            under = which == cs.punch_index
+            if under.any():
+                self.advance_m += float(gap[under].min())
         v = np.zeros((n, 3))
         t = 0.0
         interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)

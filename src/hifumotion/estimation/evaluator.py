@@ -37,12 +37,15 @@ def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: 
                       threads: int | None = 1) -> dict:
     """One forward run (a Dask task): residuals (mm) of the first ``upto`` training frames.
 
-    ``threads``: Numba threads of the run (1 on a worker: the workers are the parallelism;
+    ``threads``: Numba and MKL threads of the run (1 on a worker: the workers are the parallelism;
     None leaves the process's setting)."""
     if threads is not None:
         import numba
 
+        from hifumotion.creep.linear import set_threads
+
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+        set_threads(int(threads))
     n = len(data.frames) if upto is None else int(upto)
     run = run_model(spec, k, int(data.frames[n - 1]))
     r = residuals_mm(run.points_mm, data, n)
