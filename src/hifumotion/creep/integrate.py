@@ -202,7 +202,9 @@ class CreepSolver:
         rows, cols, vals = [], [], []
         g = np.zeros((n, 3))
         free = np.flatnonzero(cs.body < 0)
-        col = 0
+        # a code per reduced unknown (node·8 + 0–2 a free axis, + 3–4 a slip tangent; −1 the
+        # bar's advance): how the unknowns of two contact sets correspond
+        codes = [(8 * free[:, None] + np.arange(3)).ravel()]
         rows.append((3 * free[:, None] + np.arange(3)).ravel())
         cols.append(np.arange(3 * len(free)))
         vals.append(np.ones(3 * len(free)))
@@ -218,6 +220,7 @@ class CreepSolver:
             g[contact[stick]] += np.einsum("na,nak->nk", held[stick], frames[stick, 1:])
             slip = np.flatnonzero(cs.status[contact] == SLIP)
             for a in (1, 2):
+                codes.append(8 * contact[slip] + 2 + a)
                 rows.append((3 * contact[slip][:, None] + np.arange(3)).ravel())
                 cols.append(np.repeat(col + np.arange(len(slip)), 3))
                 vals.append(frames[slip, a].ravel())
@@ -225,6 +228,7 @@ class CreepSolver:
             on_punch = np.flatnonzero(coef != 0)
             if len(on_punch):
                 s_col = col
+                codes.append(np.array([-1]))
                 rows.append((3 * contact[on_punch][:, None] + np.arange(3)).ravel())
                 cols.append(np.full(3 * len(on_punch), s_col))
                 vals.append(frames[on_punch, 0].ravel())
@@ -232,6 +236,7 @@ class CreepSolver:
         t = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                           shape=(3 * n, col))
         self._t, self._g_const, self._s_col = t, g.ravel(), s_col
+        self._codes = np.concatenate(codes)
         self._reduction_key = key
         return self._t, self._g_const, self._s_col
 
@@ -245,24 +250,60 @@ class CreepSolver:
         if s_col >= 0 and guess is not None:
             x0[s_col] = self.advance_m
         full_key = (self.contacts.version, key)
-        # the last factorisation preconditions any matrix of the same contact set: a new μ or
-        # Δt changes values, not the unknowns (a fresh one when CG needs more than its budget)
-        if self._factor is not None and self._factor_key[0] == full_key[0] and x0 is not None:
+        # the last factorisation preconditions any later matrix: a new μ or Δt changes values;
+        # a contact set a few nodes apart changes a few unknowns, which the preconditioner maps
+        # by their codes (those it never knew get their diagonal). A fresh factorisation only
+        # when conjugate gradients need more than their budget.
+        reduced = self._reduced(a, t)
+        if self._factor is not None and x0 is not None:
             def apply(q):
-                return t.T @ (a @ (t @ q))
-            q, its, ok = preconditioned_cg(apply, rhs_q, self._factor, x0, self.settings.cg_rtol,
+                return reduced @ q
+            precondition = self._factor if self._factor_key[0] == full_key[0] else self._mapped(a)
+            q, its, ok = preconditioned_cg(apply, rhs_q, precondition, x0, self.settings.cg_rtol,
                                            self.settings.cg_iterations)
             self.stats["cg_iterations"] += its
             if ok:
                 return t @ q + g, (q[s_col] if s_col >= 0 else None)
-        reduced = (t.T @ a @ t).tocsr()
         if self._factor is not None:
             self._factor.release()
         self._factor = Factor(reduced, self.settings.solver)
         self._factor_key = full_key
+        self._factor_codes = self._codes
         self.stats["factorisations"] += 1
         q = self._factor.solve(rhs_q)
         return t @ q + g, (q[s_col] if s_col >= 0 else None)
+
+    def _reduced(self, a: sp.csr_matrix, t: sp.csr_matrix) -> sp.csr_matrix:
+        """Tᵀ A T, kept while the step's matrix and the contact set are the same."""
+        key = (id(a), self.contacts.version)
+        if getattr(self, "_reduced_key", None) != key:
+            self._reduced_matrix = (t.T @ a @ t).tocsr()
+            self._reduced_key = key
+            self._reduced_of = a  # holds ``a`` alive, so its id is not reused while cached
+        return self._reduced_matrix
+
+    def _mapped(self, a: sp.csr_matrix):
+        """The last factorisation as a preconditioner of the current contact set's system."""
+        old, new = self._factor_codes, self._codes
+        order = np.argsort(old)
+        at = np.searchsorted(old[order], new)
+        at = np.minimum(at, len(old) - 1)
+        known = old[order][at] == new
+        where = order[at[known]]
+        diag = np.asarray(self._reduced(a, self._t).diagonal()) if (~known).any() else None
+        factor = self._factor
+
+        class Mapped:
+            def solve(self, r):
+                full = np.zeros(len(old))
+                full[where] = r[known]
+                z = np.empty_like(r)
+                z[known] = factor.solve(full)[where]
+                if diag is not None:
+                    z[~known] = r[~known] / diag[~known]
+                return z
+
+        return Mapped()
 
     # -- one step ---------------------------------------------------------------------
     def _engage_punch(self, u: np.ndarray, force_n: float) -> None:
