@@ -145,3 +145,26 @@ def test_bad_input_is_refused_with_a_named_field():
     solver = CreepSolver(mesh, CreepMaterial(1e3, 0.3), Surroundings(), [Plane((0, 0, 0), (0, 1, 0))], None)
     with pytest.raises(InputError, match="increasing"):
         solver.run(np.array([1.0, 0.5]))
+
+
+def test_clamped_beam_sags_as_beam_theory_says():
+    # hifumotion validate cantilever's beam (80 × 10 × 6 mm, E = 10 MPa, ν = 0, its weight), clamped
+    # by a bonded wall: Euler–Bernoulli 3ρgL⁴/(2Eh²) within the case's 3 %, approaching Timoshenko's
+    # shear-corrected value (+ 4EI/(κGAL²) = +1.25 % here) as the spacing halves
+    length, height, width, e, rho, g = 0.08, 0.01, 0.006, 1e7, 1000.0, 9.81
+    euler = 3 * rho * g * length ** 4 / (2 * e * height ** 2)
+    timoshenko = euler * (1 + 4 * (e * height ** 2 / 12) / ((5 / 6) * (e / 2) * height ** 2 * length ** 2))
+    errors = []
+    for layers in (5, 10):
+        dx = height / layers
+        axes = [dx * (np.arange(round(s / dx)) + 0.5) for s in (length, height, width)]
+        pts = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) / MM + np.array([0.0, 20.0, 0.0])
+        mesh = voxel_mesh(pts, dx / MM)
+        solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho), Surroundings((0, -g, 0)),
+                             [Plane((0, 0, 0), (1, 0, 0), bonded=True)], None)
+        r = solver.run(np.array([0.0, 0.1]))
+        tip = mesh.nodes_mm[:, 0] > length / MM - 1e-6
+        sag = -(r.nodes_mm[0][tip, 1] - mesh.nodes_mm[tip, 1]).mean() * MM
+        assert sag == pytest.approx(euler, rel=0.03)
+        errors.append(abs(sag - timoshenko))
+    assert errors[1] < errors[0]

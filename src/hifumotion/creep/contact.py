@@ -28,11 +28,15 @@ FREE, STICK, SLIP = 0, 1, 2
 
 @dataclass(frozen=True)
 class Plane:
-    """A rigid plane the tissue stays on the ``normal`` side of (m; unit normal)."""
+    """A rigid plane the tissue stays on the ``normal`` side of (m; unit normal).
+
+    ``bonded``: nodes that touch it are held for good (a clamp: never released, never slip).
+    """
 
     point_m: tuple[float, float, float]
     normal: tuple[float, float, float]
     friction: float = 0.5
+    bonded: bool = False
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,7 @@ class ContactSet:
             normals.append(np.asarray(punch.axis, float))
         self.body_frames = _frames(np.array(normals)) if normals else np.zeros((0, 3, 3))
         self.friction = np.array([p.friction for p in self.planes] + ([punch.friction] if punch else []))
+        self.bonded = np.array([p.bonded for p in self.planes] + ([False] if punch else []), bool)
         self.version = 0  # bumped whenever the constrained set changes
 
     @property
@@ -133,7 +138,7 @@ class ContactSet:
             return
         self.body[nodes] = bodies
         # on a frictionless solid a contact slips from the start (it has nothing to stick with)
-        self.status[nodes] = np.where(self.friction[bodies] > 0, STICK, SLIP)
+        self.status[nodes] = np.where((self.friction[bodies] > 0) | self.bonded[bodies], STICK, SLIP)
         self.direction[nodes] = 0.0
         self.anchor[nodes] = u[nodes]
         self.version += 1
@@ -166,11 +171,12 @@ class ContactSet:
             tangential = reaction[contact] - normal[:, None] * frames[:, 0]
             mu = self.friction[self.body[contact]]
             self.pressure[contact] = np.maximum(normal, 0.0)
-            pulling = normal < -1e-9 * scale
+            held = self.bonded[self.body[contact]]
+            pulling = (normal < -1e-9 * scale) & ~held
             if pulling.any():
                 self.release(contact[pulling])
                 changed_set = True
-            stick = (self.status[contact] == STICK) & ~pulling
+            stick = (self.status[contact] == STICK) & ~pulling & ~held
             t_size = np.linalg.norm(tangential, axis=1)
             slides = stick & (t_size > mu * np.maximum(normal, 0.0) * (1 + 1e-6) + 1e-12 * scale)
             if slides.any():
