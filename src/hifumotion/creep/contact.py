@@ -96,9 +96,6 @@ class ContactSet:
     def punch_index(self) -> int:
         return len(self.planes)
 
-    def key(self) -> tuple:
-        return (self.version,)
-
     def gaps(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Smallest signed gap (m) of every node to the solids and which solid (−1: none near)."""
         x = self.rest + u

@@ -29,7 +29,6 @@ from numba import njit
 
 _XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
                 [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
-_XI_NB = _XI.copy()  # a module-level array Numba freezes into the kernels
 
 #: Deviatoric and volumetric projectors on Voigt strain (xx, yy, zz, xy, yz, zx; engineering shear).
 _DEV = np.zeros((6, 6))
@@ -104,9 +103,12 @@ def _scatter(emap, block, scale, data):
 
 
 @njit(cache=True)
-def _element_rates(velocity, elements, b0, out):
-    """Equivalent shear rate √(2 dev ε̇ : dev ε̇) (1/s) at each voxel's centre."""
-    for e in range(elements.shape[0]):
+def _element_rates(velocity, elements, which, blocks, block_of, out):
+    """Equivalent shear rate √(2 dev ε̇ : dev ε̇) (1/s) at the centres of the voxels ``which``,
+    voxel ``which[m]`` with the centre B ``blocks[block_of[m]]``."""
+    for m in range(which.shape[0]):
+        e = which[m]
+        b0 = blocks[block_of[m]]
         rate = np.zeros(6)
         for a in range(8):
             n = elements[e, a]
@@ -139,13 +141,6 @@ class Assembly:
         pos = _positions(self.indptr, self.indices, rows, cols)
         self.emap = pos.reshape(len(self.elements), 24, 24)
 
-    def matrix(self, terms) -> sp.csr_matrix:
-        """Σ over ``terms`` of ``(block (24, 24), scale per element)`` as a CSR matrix."""
-        data = np.zeros(len(self.indices))
-        for block, scale in terms:
-            _scatter(self.emap, np.ascontiguousarray(block), np.ascontiguousarray(scale, float), data)
-        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.size, self.size))
-
 
 @njit(cache=True)
 def _positions(indptr, indices, rows, cols):
@@ -164,14 +159,7 @@ def _positions(indptr, indices, rows, cols):
     return out
 
 
-def element_rates(velocity_m_s: np.ndarray, elements: np.ndarray, cube: CubeMatrices) -> np.ndarray:
-    """Equivalent shear rate (1/s) of every voxel from the node velocities (m/s)."""
-    out = np.empty(len(elements))
-    _element_rates(np.ascontiguousarray(velocity_m_s, float), elements, cube.centre_b, out)
-    return out
-
-
-__all__ = ["CubeMatrices", "cube_matrices", "strain_matrix", "Assembly", "element_rates"]
+__all__ = ["CubeMatrices", "cube_matrices", "strain_matrix", "Assembly"]
 
 
 @njit(cache=True)
@@ -179,7 +167,7 @@ def _shape_gradients(p0, p1, p2):
     """∂N_a/∂ξ (8 × 3) of the trilinear shape functions at (ξ, η, ζ)."""
     out = np.empty((8, 3))
     for a in range(8):
-        s0, s1, s2 = _XI_NB[a, 0], _XI_NB[a, 1], _XI_NB[a, 2]
+        s0, s1, s2 = _XI[a, 0], _XI[a, 1], _XI[a, 2]
         out[a, 0] = s0 * (1 + s1 * p1) * (1 + s2 * p2) / 8.0
         out[a, 1] = s1 * (1 + s0 * p0) * (1 + s2 * p2) / 8.0
         out[a, 2] = s2 * (1 + s0 * p0) * (1 + s1 * p1) / 8.0
@@ -231,7 +219,7 @@ def _general_blocks(x, elements, which, dev_p, vol_p, full_p, dev, vol, visc, b0
                 x_e[a, c] = x[elements[e, a], c]
         worst = 1e300
         for q in range(8):
-            det = _b_at(x_e, _XI_NB[q, 0] * g, _XI_NB[q, 1] * g, _XI_NB[q, 2] * g, b)
+            det = _b_at(x_e, _XI[q, 0] * g, _XI[q, 1] * g, _XI[q, 2] * g, b)
             worst = min(worst, det)
             db = dev_p @ b
             fb = full_p @ b
@@ -271,25 +259,6 @@ def _scatter_blocks(emap, which, blocks, scale, data):
         for p in range(24):
             for q in range(24):
                 data[emap[e, p, q]] += s * blocks[m, p, q]
-
-
-@njit(cache=True)
-def _element_rates_each(velocity, elements, which, b0s, out):
-    for m in range(which.shape[0]):
-        e = which[m]
-        rate = np.zeros(6)
-        for a in range(8):
-            n = elements[e, a]
-            for c in range(3):
-                vc = velocity[n, c]
-                for r in range(6):
-                    rate[r] += b0s[m, r, 3 * a + c] * vc
-        tr = (rate[0] + rate[1] + rate[2]) / 3.0
-        d0 = rate[0] - tr
-        d1 = rate[1] - tr
-        d2 = rate[2] - tr
-        dd = d0 * d0 + d1 * d1 + d2 * d2 + 0.5 * (rate[3] ** 2 + rate[4] ** 2 + rate[5] ** 2)
-        out[e] = math.sqrt(2.0 * dd)
 
 
 class MeshMatrices:
@@ -336,8 +305,9 @@ class MeshMatrices:
         """Equivalent shear rate (1/s) of every element from the node velocities (m/s)."""
         v = np.ascontiguousarray(velocity_m_s, float)
         out = np.empty(len(self.elements))
-        _element_rates(v, self.elements, self.cube.centre_b, out)
-        _element_rates_each(v, self.elements, self.distorted, self.b0, out)
+        _element_rates(v, self.elements, self.regular, self.cube.centre_b[None],
+                       np.zeros(len(self.regular), np.int64), out)
+        _element_rates(v, self.elements, self.distorted, self.b0, np.arange(len(self.distorted)), out)
         return out
 
 

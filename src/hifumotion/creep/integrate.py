@@ -246,7 +246,8 @@ class CreepSolver:
         if s_col >= 0:
             rhs_q[s_col] += force_n
         self.stats["solves"] += 1
-        x0 = None if guess is None else t.T @ (guess - g)  # T has orthonormal columns but the s column
+        # the guess in reduced unknowns: T's columns are orthonormal but the bar's advance's
+        x0 = None if guess is None else t.T @ (guess - g)
         if s_col >= 0 and guess is not None:
             x0[s_col] = self.advance_m
         full_key = (self.contacts.version, key)

@@ -129,7 +129,7 @@ def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Cal
     times = np.arange(n_frames) * run.output_interval_s
     result = solver.run(times, progress)
     if punch is not None:
-        tip = np.asarray(punch.tip_m) / MM + solver_advance_at_rest(result) * axis
+        tip = np.asarray(punch.tip_m) / MM + result.stats["advance_at_rest_mm"] * axis
         bar = tip[None] + result.advance_mm[:, None] * axis[None] - 0.5 * scene.bar.length_mm * axis[None]
     else:
         bar = np.full((n_frames, 3), np.nan)
@@ -142,11 +142,6 @@ def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Cal
 
         write_frames(folder, sim, mesh, result, run.vtu_every)
     return sim
-
-
-def solver_advance_at_rest(result) -> float:
-    """The bar's advance (mm) already taken at frame 0 (it is measured from there)."""
-    return float(result.stats.get("advance_at_rest_mm", 0.0))
 
 
 __all__ = ["simulate_creep", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]

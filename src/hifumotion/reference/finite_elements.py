@@ -200,13 +200,9 @@ def punch_reference(problem: PunchedTissue, tolerance: float = 1e-4, max_iterati
             lo = (delta, fl, br, f)
         else:
             hi = (delta, f)
-    u1, f1 = best
-    iterations = counter[0]
-    start, d1 = top, delta
-    push = u1[dof_xyz] / MM
-    sol = ReferenceSolution(points / MM, push, (d1 - start) / MM, f1, stiffness.shape[0], mesh.t.shape[1],
-                            iterations, basis, u1)
-    return sol
+    u_final, force = best
+    return ReferenceSolution(points / MM, u_final[dof_xyz] / MM, (delta - top) / MM, force, stiffness.shape[0],
+                             mesh.t.shape[1], counter[0], basis, u_final)
 
 
 __all__ = ["PunchedTissue", "ReferenceSolution", "punch_reference"]
