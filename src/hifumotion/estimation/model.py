@@ -151,8 +151,8 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     tank = TankConfig(size_mm=setup.tank.size_mm, water_depth_mm=setup.tank.water_depth_mm)
     bar = BarConfig(enabled=b.enabled, radius_mm=b.radius_mm, length_mm=b.length_mm, direction=b.direction,
                     tip_mm=tuple(float(c) for c in (b.tip_at_rest_mm if tip is None else tip)),
-                    weight_supported=b.weight_supported, force_n=Parameters().force_n,
-                    ramp_s=float(s.force_ramp_s if s.force_ramp_s is not None else setup.push.ramp_s))
+                    weight_supported=b.weight_supported,
+                    **push_fields(setup.push, Parameters().force_n, s.force_ramp_s))
     tissue_cfg = TissueConfig(density_kg_m3=s.tissue_density_kg_m3, rate_floor_per_s=s.rate_floor_per_s,
                               shape="particles", particles_csv="tissue_particles.csv",
                               centre_mm=tuple(float(c) for c in (tissue.min(0) + tissue.max(0)) / 2))
@@ -166,6 +166,14 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     points = _plane_points(observation.frame_plane, px)
     return ModelSpec(scene, tissue, volume, points, observation.observed.frame_interval_s, s,
                      surface, np.asarray(rec.mesh.faces, np.int64))
+
+
+def push_fields(push, peak_force_n: float, ramp_override_s: float | None) -> dict:
+    """The bar's schedule fields for ``setup.json``'s push shape at ``peak_force_n``."""
+    if push.shape == "ramp_hold":
+        return push.model_copy(update={"ramp_s": float(ramp_override_s if ramp_override_s is not None
+                                                       else push.ramp_s)}).schedule(peak_force_n)
+    return push.schedule(peak_force_n)
 
 
 def _plane_points(plane, xy_px: np.ndarray) -> np.ndarray:
@@ -186,6 +194,10 @@ def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
     scene.tissue.poisson_ratio = k.poisson_ratio
     scene.tissue.beta1 = k.beta1
     scene.tissue.beta2 = k.beta2
+    if scene.bar.schedule_force_n is not None:
+        # a known shape, an unknown magnitude: the schedule scales with the fitted peak
+        peak = max(scene.bar.schedule_force_n)
+        scene.bar.schedule_force_n = [f * k.force_n / peak for f in scene.bar.schedule_force_n]
     scene.bar.force_n = k.force_n
     scene.run.duration_s = max(last_frame, 1) * spec.frame_interval_s
     scene.run.settle_s = settle_s

@@ -112,6 +112,22 @@ class Blob:
         verts = verts - resolution_mm + np.array([ax[0] for ax in axes])
         return trimesh.Trimesh(verts + self.offset_mm(), faces[:, ::-1], process=True)
 
+    def star_surface(self, subdivisions: int = 4):
+        """The sample's closed surface (``trimesh.Trimesh``, mm, resting frame) as the star
+        body's radial graph over an icosphere: vertex d at a ⊙ d (1 + ε f(d)); the points
+        below the cut are lowered onto it along y (the body shrinks towards its base, so
+        they land inside the cut's section). Smooth and coarse, for a finite-element mesh
+        (:meth:`surface` is the fine marching-cubes one)."""
+        import trimesh
+
+        sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
+        d = np.asarray(sphere.vertices, float)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        q = d * (1.0 + self.irregularity * self._field(d))[:, None]
+        q[:, 1] = np.maximum(q[:, 1], self.cut_y)
+        verts = q * np.asarray(self.semi_axes_mm)
+        return trimesh.Trimesh(verts + self.offset_mm(), np.asarray(sphere.faces), process=True)
+
     def volume_mm3(self, samples: int = 400_000, seed: int = 0) -> float:
         """Volume (mm³) by Monte Carlo over the bounding box (±0.3 % at the default samples)."""
         rng = np.random.default_rng(seed)

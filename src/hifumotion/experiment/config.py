@@ -74,6 +74,49 @@ class TwinRunConfig(ConfigModel):
     particle_frames_every: int = Field(5, ge=1, description="write every n-th frame's particles as VTU (all frames go to tissue_trajectory.npz)")
 
 
+class TruthConfig(ConfigModel):
+    solver: Literal["finite_elements", "particles"] = Field("finite_elements", description="what computes the truth: finite_elements (P2 tetrahedra, BDF2, Coulomb contacts; independent of the fitted voxel model) or particles (the explicit SPH path of Eq. 8–20)")
+    max_volume_mm3: float = Field(8.0, gt=0, description="finite elements: largest tetrahedron in mm³")
+    surface_subdivisions: int = Field(3, ge=2, le=5, description="finite elements: icosphere subdivisions of the sample's surface (3: 1,280 triangles)")
+    tolerance_mm: float = Field(0.002, gt=0, description="finite elements: local error of a time step in mm")
+
+
+class ProtocolConfig(ConfigModel):
+    """How the bar pushes; sets the bar's schedule and direction (the preset names a therapy's protocol)."""
+
+    name: Literal["paper", "slow_push", "push_release", "oblique", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; custom: the [bar] section as given")
+    peak_force_n: float | None = Field(None, gt=0, description="the largest force in N (default: bar.force_n)")
+    ramp_s: float | None = Field(None, ge=0, description="paper/oblique/push_release: duration of the rise in s (default: bar.ramp_s; push_release: 1.5 s)")
+    hold_s: float = Field(3.0, ge=0, description="push_release: time held at the peak in s")
+    angle_deg: float = Field(25.0, ge=0, lt=60, description="oblique: tilt of the bar from the vertical in degrees (in the x–y plane, pushing towards +x)")
+
+
+def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
+    """The bar's schedule and direction as the protocol says (``custom`` leaves the bar as it is)."""
+    import math
+
+    p = cfg.protocol
+    if p.name == "custom":
+        return cfg
+    bar = cfg.bar.model_dump()
+    peak = p.peak_force_n if p.peak_force_n is not None else cfg.bar.force_n
+    end = (cfg.imaging.frames - 1) / cfg.imaging.frame_rate_hz
+    bar.update(force_n=peak, schedule_times_s=None, schedule_force_n=None, direction=(0.0, -1.0, 0.0))
+    if p.name in ("paper", "oblique"):
+        bar["ramp_s"] = p.ramp_s if p.ramp_s is not None else cfg.bar.ramp_s
+    elif p.name == "slow_push":
+        bar.update(schedule_times_s=[0.0, end], schedule_force_n=[0.0, peak])
+    elif p.name == "push_release":
+        ramp = p.ramp_s if p.ramp_s is not None else 1.5
+        up, down = ramp, ramp + p.hold_s
+        bar.update(schedule_times_s=[0.0, up, down, down + ramp], schedule_force_n=[0.0, peak, peak, 0.0])
+    if p.name == "oblique":
+        a = math.radians(p.angle_deg)
+        bar["direction"] = (math.sin(a), -math.cos(a), 0.0)
+    bar = BarConfig(**bar)
+    return cfg.model_copy(update={"bar": bar})
+
+
 class TwinConfig(ConfigModel):
     """The synthetic experiment: sample, material, bar, tank, resolution, imaging."""
 
@@ -87,6 +130,8 @@ class TwinConfig(ConfigModel):
     imaging: ImagingConfig = ImagingConfig()
     clinician: ClinicianConfig = ClinicianConfig()
     run: TwinRunConfig = TwinRunConfig()
+    truth: TruthConfig = TruthConfig()
+    protocol: ProtocolConfig = ProtocolConfig(name="custom")
 
 
 #: Overrides of each preset on top of the defaults.
@@ -97,6 +142,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "resolution": {"model_tissue_particles": 500},
         "imaging": {"frames": 40, "frame_rate_hz": 4.0, "pixel_mm": 0.4, "sweep_gap_mm": 2.0},
         "run": {"particle_frames_every": 10},
+        # the plumbing's twin: the particle truth takes seconds, the finite elements minutes
+        "truth": {"solver": "particles"},
     },
     # the paper's protocol (200 frames at 20 Hz) on a coarse model: `hifumotion demo` in minutes
     "demo": {
@@ -105,8 +152,12 @@ PRESETS: dict[str, dict[str, Any]] = {
         "run": {"particle_frames_every": 10},
     },
 }
+# the therapy protocols (issue 19), each on the demo's resolution
+for _name, _extra in (("paper", {}), ("slow_push", {"peak_force_n": 1.0}), ("push_release", {"peak_force_n": 0.6}),
+                      ("oblique", {"peak_force_n": 0.5})):
+    PRESETS[_name] = {**PRESETS["demo"], "protocol": {"name": _name, **_extra}}
 
-Preset = Literal["default", "small", "demo"]
+Preset = Literal["default", "small", "demo", "paper", "slow_push", "push_release", "oblique"]
 
 
 def _merge(base: dict, extra: dict) -> dict:
@@ -130,4 +181,4 @@ def twin_config(preset: str = "default", overrides: dict[str, Any] | None = None
         data = _merge(data, overrides)
     if seed is not None:
         data["seed"] = int(seed)
-    return validate_config(TwinConfig, data, source)
+    return apply_protocol(validate_config(TwinConfig, data, source))

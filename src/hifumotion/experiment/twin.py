@@ -3,10 +3,13 @@
 1. **Sample.** A seeded irregular blob (:mod:`.blob`); its volume fixes the fitted
    model's particle spacing (``resolution.model_tissue_particles``, the paper's
    4,399) and the truth's, ``truth_particle_factor`` times as many particles.
-2. **Physics.** The particle framework (:mod:`hifumotion.particles`) simulates the
-   sample in its pool, pushed by the bar (force ramp, then held), at the truth's
-   resolution; it settles under gravity first, then runs ``frames / frame_rate``
-   seconds, recording the tissue at every frame time.
+2. **Physics.** By default quadratic finite elements
+   (:mod:`hifumotion.experiment.fe_truth`, :mod:`hifumotion.reference.creep_fe`) — a
+   solver that shares the fitted model's physics and none of its discretisation —
+   settle the sample under gravity, then push it by the protocol's schedule for
+   ``frames / frame_rate`` seconds; the displacement is sampled at the truth's lattice
+   at every frame time. ``truth.solver = "particles"`` uses the particle framework's
+   explicit path (:mod:`hifumotion.particles`) instead.
 3. **Truth.** Cross-sections of the particles (:func:`~hifumotion.particles.section.section`)
    in the imaging plane at every frame, and in every sweep plane at rest.
 4. **Observation.** B-mode images of the same planes (:mod:`.imaging`) with the
@@ -97,6 +100,15 @@ def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float, height_
                       settle_s=settle_s, settle_damping_per_s=settle_damping,
                       mass_scaling=cfg.run.mass_scaling, cfl=cfg.run.cfl, max_step_s=cfg.run.max_step_s,
                       write_vtu=True, vtu_every=cfg.run.particle_frames_every))
+
+
+def push_shape(bar) -> PushSchedule:
+    """The shape of the bar's schedule, for ``setup.json`` (its magnitude is not the operator's to know)."""
+    if bar.schedule_times_s is None:
+        return PushSchedule(shape="ramp_hold", ramp_s=bar.ramp_s)
+    peak = max(bar.schedule_force_n)
+    return PushSchedule(shape="piecewise_linear", times_s=list(bar.schedule_times_s),
+                        relative_force=[f / peak for f in bar.schedule_force_n])
 
 
 def clinician_contour(contour_mm: np.ndarray, cfg_points: int, error_mm: float,
@@ -217,7 +229,12 @@ def simulate_truth(cfg: TwinConfig, folder: str | Path, progress: Callable[[floa
     scene_for_file.tissue.particles_csv = Path("blob_particles.csv")
     write_text(folder / "scene.toml", dump_toml(scene_for_file))
     t1 = time.perf_counter()
-    sim = simulate(scene, folder / "particles", progress=progress)
+    if cfg.truth.solver == "finite_elements":
+        from hifumotion.experiment.fe_truth import simulate_fe_truth
+
+        sim, _ = simulate_fe_truth(cfg, blob, pts, dx, placement, folder, progress)
+    else:
+        sim = simulate(scene, folder / "particles", progress=progress)
     return TruthRun(blob, res, scene, sim, dx, pts, placement, t1 - t0, time.perf_counter() - t1)
 
 
@@ -231,7 +248,7 @@ def truth_sections(truth: TruthRun, probe: im.Probe, progress: Callable[[float],
     tell = progress or (lambda f: None)
     sim = truth.simulation
     n = len(sim.times_s) + len(probe.sweep_z_mm)
-    rest = sim.system.tissue_rest * 1000.0
+    rest = truth.particles_mm   # the lattice at rest, before settling (the truth's reference shape)
     # the blob's own frame: undo the placement in the tank and the resting frame's offset
     shift = truth.placement_mm + truth.blob.offset_mm()
 
@@ -339,7 +356,7 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
                      direction=tuple(axis.tolist()), tip_at_rest_mm=tuple(tip0.tolist()) if cfg.bar.enabled
                      else tuple(0.5 * np.asarray(cfg.tank.size_mm)), weight_supported=cfg.bar.weight_supported),
         # how the push is applied, not how hard: the force rises linearly over this time, then holds
-        push=PushSchedule(shape="ramp_hold", ramp_s=cfg.bar.ramp_s))
+        push=push_shape(cfg.bar))
     observed = Observed(sweep, np.asarray(probe.sweep_z_mm, float), frames, Contour.from_mm(clicked, px), setup)
     write_observed(obs, setup, sweep, observed.sweep_z_mm, frames, observed.initial_contour)
     write_png_stack(tru / "frames", frame_masks, prefix="frame_", digits=4)
@@ -368,9 +385,10 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
         "tissue_density_kg_m3": cfg.tissue.density_kg_m3,
         "water_density_kg_m3": cfg.physics.water_density_kg_m3,
         "water_viscosity_pa_s": cfg.physics.water_viscosity_pa_s,
-        "water_stiffness_m2_s2": system.fluid_stiffness_m2_s2,
-        "contact_coefficient_n_m4_kg2": system.contact_coefficient,
-        "wall_coefficient_n_m4_kg2": system.wall_coefficient,
+        **({"water_stiffness_m2_s2": system.fluid_stiffness_m2_s2,
+            "contact_coefficient_n_m4_kg2": system.contact_coefficient,
+            "wall_coefficient_n_m4_kg2": system.wall_coefficient} if system is not None else {}),
+        "truth_solver": cfg.truth.solver,
         "friction": cfg.physics.friction,
         "gravity_m_s2": cfg.physics.gravity_m_s2,
         "mass_scaling": cfg.run.mass_scaling,

@@ -90,8 +90,30 @@ class BarSetup(ConfigModel):
 class PushSchedule(ConfigModel):
     """The shape of the force's schedule (its magnitude is what the estimation finds)."""
 
-    shape: Literal["ramp_hold"] = Field("ramp_hold", description="ramp_hold: a linear rise over ramp_s, then held")
+    shape: Literal["ramp_hold", "piecewise_linear"] = Field("ramp_hold", description="ramp_hold: a linear rise over ramp_s, then held; piecewise_linear: the force at times_s is relative_force × its unknown peak, linear in between")
     ramp_s: float = Field(0.0, ge=0, description="duration of the rise (s)")
+    times_s: list[float] | None = Field(None, description="piecewise_linear: the schedule's times (s), increasing")
+    relative_force: list[float] | None = Field(None, description="piecewise_linear: the force at each time over the peak force (0 … 1)")
+
+    @model_validator(mode="after")
+    def _piecewise(self):
+        if self.shape == "piecewise_linear":
+            if self.times_s is None or self.relative_force is None or len(self.times_s) != len(self.relative_force) \
+                    or len(self.times_s) < 2:
+                raise ValueError("piecewise_linear needs times_s and relative_force of the same length (≥ 2)")
+            if any(b <= a for a, b in zip(self.times_s, self.times_s[1:])):
+                raise ValueError("times_s must increase")
+            if any(not 0.0 <= f <= 1.0 for f in self.relative_force) or max(self.relative_force) <= 0:
+                raise ValueError("relative_force must lie in 0 … 1 with a positive peak")
+        return self
+
+    def schedule(self, peak_force_n: float) -> dict:
+        """The :class:`~hifumotion.particles.scene.BarConfig` fields of this shape at ``peak_force_n``."""
+        if self.shape == "piecewise_linear":
+            return {"schedule_times_s": list(self.times_s),
+                    "schedule_force_n": [peak_force_n * f for f in self.relative_force],
+                    "force_n": peak_force_n, "ramp_s": 0.0}
+        return {"force_n": peak_force_n, "ramp_s": self.ramp_s, "schedule_times_s": None, "schedule_force_n": None}
 
 
 def check_bar_in_tank(bar: BarSetup, tank: TankSetup) -> None:
