@@ -18,6 +18,7 @@ demo: $(STAMP)
 	$(BIN)/hifumotion demo -o demo-output --overwrite
 
 test: $(STAMP)
+	@sh scripts/ensure_browser.sh
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP)

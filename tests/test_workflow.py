@@ -85,6 +85,21 @@ def _check_outputs(out: Path, n_frames: int, pictures_at_least: int) -> dict:
 
 
 @pytest.mark.slow
+def _check_in_browser(report):
+    """The report renders in a real browser with every figure loaded; None, or why it could not be opened."""
+    from browser import NoBrowser, rendered
+
+    try:
+        page = rendered(report)
+    except NoBrowser as exc:
+        return str(exc)
+    assert page["title"] and page["images"], page
+    broken = [src for src, ok in page["images"] if not ok]
+    assert not broken, f"figures that did not load: {broken}"
+    assert "Traceback" not in page["text"]
+    return None
+
+
 def test_demo_runs_the_whole_system_on_a_small_twin(tmp_path, shared_data_or_none):
     out = tmp_path / "demo"
     args = ["demo", "--preset", "small", "--seed", "2", "--particles", "200", "--max-evaluations", "1",
@@ -103,6 +118,9 @@ def test_demo_runs_the_whole_system_on_a_small_twin(tmp_path, shared_data_or_non
     assert set(seg) == {"gac", "cv", "lcv", "rsf", "mslcv", "glcv"} and seg["glcv"] > 0.85
     assert (out / "experiment" / "truth" / "parameters.json").is_file()
     assert (out / "calibration" / "observation" / "tissue_volume.nii.gz").is_file()
+    why = _check_in_browser(out / "report" / "report.html")
+    if why:   # everything else passed; say visibly that the browser check could not run
+        pytest.skip(f"the demo passed; its report was not opened in a browser: {why}")
 
 
 @pytest.mark.slow
@@ -160,3 +178,22 @@ masks = "{folder / 'truth' / 'frames'}"
     assert np.abs(a.astype(int) - b.astype(int)).max() <= 1
     summary = _check_outputs(out, setup["frames"], 4)
     assert summary["truth"] == "expert masks" and summary["validation_dsc_mean"] > 0.85
+    why = _check_in_browser(out / "report" / "report.html")
+    if why:
+        pytest.skip(f"the run passed; its report was not opened in a browser: {why}")
+
+
+def test_the_browser_check_sees_a_figure_that_does_not_load(tmp_path):
+    """The check that opens the reports in Chromium must be able to fail: a page whose second
+    figure is missing shows one loaded image and one broken."""
+    from browser import NoBrowser, rendered
+    import imageio.v3 as iio
+
+    iio.imwrite(tmp_path / "a.png", np.full((8, 8), 200, np.uint8))
+    (tmp_path / "page.html").write_text('<html><head><title>t</title></head><body>'
+                                        '<img src="a.png"><img src="missing.png"></body></html>')
+    try:
+        page = rendered(tmp_path / "page.html")
+    except NoBrowser as exc:
+        pytest.skip(f"no browser here: {exc}")
+    assert page["title"] == "t" and [ok for _, ok in page["images"]] == [True, False]
