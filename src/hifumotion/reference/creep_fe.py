@@ -510,9 +510,6 @@ class _Solver:
         n = self.p2.dofs
         return sp.csr_matrix((data, indices, indptr), shape=(n, n))
 
-    def bar_force(self, reaction: np.ndarray) -> float:
-        bar = np.flatnonzero(self.contacts.where == BAR)
-        return float((reaction[self.p2.dof_xyz[bar]] @ self.axis).sum()) if len(bar) else 0.0
 
 
 def creep_reference(problem: CreepingTissue, times_s: np.ndarray, settings: CreepFESettings | None = None,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MM = 1e-3
+from hifumotion.reference._p2 import MM, spsolve
 
 
 @dataclass(frozen=True)
@@ -80,18 +80,6 @@ class ReferenceSolution:
             _, near = cKDTree(self.points_mm).query(q[~ok])
             out[~ok] = self.displacement_mm[near]
         return out
-
-
-def spsolve(matrix, rhs: np.ndarray) -> np.ndarray:
-    """A direct sparse solve: MKL PARDISO where installed (40× faster here), else SuperLU."""
-    try:
-        import pypardiso
-    except ImportError:  # pragma: no cover
-        import scipy.sparse.linalg as spla
-
-        lu = spla.splu(matrix.tocsc(), permc_spec="MMD_AT_PLUS_A")
-        return lu.solve(np.asarray(rhs, float))
-    return np.asarray(pypardiso.spsolve(matrix, np.asfortranarray(rhs, dtype=float))).reshape(rhs.shape)
 
 
 def punch_reference(problem: PunchedTissue, tolerance: float = 1e-4, max_iterations: int = 60) -> ReferenceSolution:
