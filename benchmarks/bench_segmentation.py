@@ -79,6 +79,7 @@ def main(argv=None) -> int:
     ap.add_argument("--inits", default="ellipse,points")
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--no-peers", action="store_true")
+    ap.add_argument("--peers", default=None, help="comma-separated subset of the peers (default: all)")
     ap.add_argument("--limit", type=int, default=None, help="first N images of each dataset")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rows", type=Path, default=None, help="also write every per-image row to this JSON file")
@@ -90,7 +91,11 @@ def main(argv=None) -> int:
         print(json.dumps({"skipped": f"datasets not found under {DATA}: {missing}"}))
         return 0
     methods = [m for m in args.methods.split(",") if m]
-    peers = [] if args.no_peers else list(PEERS)
+    peers = [] if args.no_peers else (list(PEERS) if args.peers is None else [p for p in args.peers.split(",") if p])
+    unknown = [p for p in peers if p not in PEERS] + [m for m in methods if m not in METHODS]
+    if unknown:
+        print(f"unknown method or peer {unknown}; methods: {', '.join(METHODS)}; peers: {', '.join(PEERS)}", file=sys.stderr)
+        return 2
     _warm_up(methods)
     from hifumotion.io.dataset import load_dataset
 

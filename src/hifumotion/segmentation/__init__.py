@@ -233,6 +233,8 @@ def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | No
     for t in (progress_bar(indices, f"tracking ({method})", total=len(indices)) if progress else indices):
         extra = dict(params)
         if t > 0 and method.lower() in ("gac", "cv", "lcv", "glcv"):
+            if method.lower() == "gac":
+                extra.setdefault("solver", "descent")  # the previous contour need not lie inside the target
             extra.setdefault("multiscale", False)
             extra.setdefault("max_iterations", TRACK_ITERATIONS)
             extra.update({k: v for k, v in carried.items() if k not in params})
