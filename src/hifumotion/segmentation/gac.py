@@ -23,11 +23,10 @@ References
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
-
-import time
 
 from hifumotion.contour import Contour
 from hifumotion.errors import InputError
