@@ -81,3 +81,40 @@ def test_the_contour_surrounds_its_start_even_without_an_edge():
 def test_an_unknown_solver_is_named():
     with pytest.raises(InputError, match="solver"):
         segment(np.zeros((40, 40)), Ellipse(20, 20, 8, 8, 0), "gac", solver="annealing")
+
+
+def test_glcv_carried_globally_and_by_its_balloon_find_the_target_in_speckle():
+    truth = star((200, 220), 112.0, 96.0, 55.0, ((3, 0.12, 0.3), (5, 0.05, 1.1)))
+    img = speckled(truth, 0.35, 1.0, seed=5)
+    start = Ellipse(108, 100, 30, 26, 15)
+    carried = segment(img, start, "glcv", carry="global")
+    assert carried.params["carry"] == "global" and carried.params["geodesic_length_px"] > 0
+    assert dice(carried.mask, truth) > 0.97
+    balloon = segment(img, start, "glcv")  # the paper's way, the default
+    assert balloon.params["carry"] == "balloon"
+    assert dice(carried.mask, truth) >= dice(balloon.mask, truth)
+    with pytest.raises(InputError, match="carry"):
+        segment(img, start, "glcv", carry="rope")
+
+
+def test_tracking_refines_locally_so_a_shrinking_target_is_followed():
+    """The global solvers keep their start inside the curve; tracking must not: its start, the
+    previous contour, lies on the boundary, and here the target shrinks by 8 % a frame."""
+    from hifumotion.segmentation import track
+
+    frames, truths = [], []
+    for k, radius in enumerate((50.0, 46.0, 42.0)):
+        truth = star((180, 180), 90.0, 90.0, radius, ())
+        frames.append(speckled(truth, 0.35, 1.0, seed=10 + k))
+        truths.append(truth)
+    result = track(np.stack(frames), Ellipse(90, 90, 30, 30, 0), "gac")
+    assert result.results[0].params["solver"] == "global" and dice(result.results[0].mask, truths[0]) > 0.97
+    assert all(r.params["solver"] == "descent" for r in result.results[1:])
+    result = track(np.stack(frames), Ellipse(90, 90, 30, 30, 0), "glcv", carry="global")
+    assert all(r.params["carry"] == "global" for r in result.results)  # what the caller asks for is kept
+    from hifumotion.segmentation import local_params
+
+    assert local_params("glcv") == {"carry": "balloon"} and local_params("lcv") == {}
+    result = track(np.stack(frames), Ellipse(90, 90, 30, 30, 0), "glcv")
+    # a globally carried contour could not have shrunk below its start, the previous frame
+    assert result.results[-1].mask.sum() < result.results[0].mask.sum()

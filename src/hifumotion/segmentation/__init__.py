@@ -49,6 +49,17 @@ METHODS: dict[str, Callable[..., SegmentationResult]] = {
 }
 
 
+#: What makes a model that solves around its start refine a contour instead: a frame's or a
+#: plane's start is the previous contour, which lies on the boundary, not inside the target.
+_LOCAL = {"gac": {"solver": "descent"}, "glcv": {"carry": "balloon"}}
+
+
+def local_params(method: str) -> dict[str, Any]:
+    """The parameters with which ``method`` refines a start lying on the boundary (tracking,
+    the next sweep plane, a carried contour) instead of carrying a start from inside."""
+    return dict(_LOCAL.get(method.lower(), {}))
+
+
 def _resolve_init(init: Any, init_kind: str | None) -> Any:
     if isinstance(init, SegmentationResult):
         return init.mask
@@ -233,8 +244,8 @@ def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | No
     for t in (progress_bar(indices, f"tracking ({method})", total=len(indices)) if progress else indices):
         extra = dict(params)
         if t > 0 and method.lower() in ("gac", "cv", "lcv", "glcv"):
-            if method.lower() == "gac":
-                extra.setdefault("solver", "descent")  # the previous contour need not lie inside the target
+            for key, value in local_params(method).items():
+                extra.setdefault(key, value)
             extra.setdefault("multiscale", False)
             extra.setdefault("max_iterations", TRACK_ITERATIONS)
             extra.update({k: v for k, v in carried.items() if k not in params})
@@ -263,4 +274,4 @@ def track(sequence: Any, init: Any, method: str = "glcv", *, init_kind: str | No
     return TrackResult(results)
 
 
-__all__ = ["METHODS", "SegmentationResult", "TrackResult", "segment", "track", "gac", "cv", "lcv", "rsf", "mslcv", "glcv"]
+__all__ = ["METHODS", "SegmentationResult", "TrackResult", "segment", "track", "local_params", "gac", "cv", "lcv", "rsf", "mslcv", "glcv"]

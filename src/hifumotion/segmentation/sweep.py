@@ -75,7 +75,7 @@ def segment_sweep(images: Any, init: Any, start: int, method: str = "glcv", spac
         :data:`MIN_AREA_FRACTION` of it is where the tissue ends: it and the planes
         beyond are empty.
     """
-    from hifumotion.segmentation import segment
+    from hifumotion.segmentation import local_params, segment
 
     imgs = np.asarray(images)
     if imgs.ndim != 3:
@@ -95,7 +95,7 @@ def segment_sweep(images: Any, init: Any, start: int, method: str = "glcv", spac
     contrast[start] = reference = region_contrast(imgs[start], first_mask)
     scale = {arg: first.params[key] for key, arg in
              (("radius_px", "radius"), ("sigma_px", "sigma"), ("kappa1", "kappa1")) if key in first.params}
-    later = {"multiscale": False, "max_iterations": PLANE_ITERATIONS, **scale, **params}
+    later = {"multiscale": False, "max_iterations": PLANE_ITERATIONS, **local_params(method), **scale, **params}
     min_area = MIN_AREA_FRACTION * first_mask.sum()
     notes = []
     for direction in (1, -1):

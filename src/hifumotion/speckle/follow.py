@@ -141,14 +141,15 @@ def refine_in_band(image: np.ndarray, carried: np.ndarray, excluded: np.ndarray,
     from scipy import ndimage
 
     from hifumotion.observed import shift_boundary
-    from hifumotion.segmentation import segment
+    from hifumotion.segmentation import local_params, segment
     from hifumotion.sequence import as_spacing_mm
 
     masked = np.where(excluded, np.float32(background), image)
     # the segmentation's own boundary lies outside the true one by the offset: start it there
     pixel = float(np.mean(as_spacing_mm(spacing_mm)))
     start = shift_boundary(carried, -boundary_offset_mm, pixel) if boundary_offset_mm else carried
-    got = segment(masked, start, method, spacing_mm, multiscale=False, max_iterations=iterations, **params).mask
+    got = segment(masked, start, method, spacing_mm, **{"multiscale": False, "max_iterations": iterations,
+                                                        **local_params(method), **params}).mask
     inner = ndimage.binary_erosion(carried, iterations=band_px)
     outer = ndimage.binary_dilation(carried, iterations=band_px)
     got = (got & outer) | inner
