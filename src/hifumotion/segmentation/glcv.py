@@ -17,9 +17,9 @@ the carrying. ``carry="global"`` does it exactly, by the GAC's global solver
 (the closed curve of least geodesic length around the start,
 :mod:`._minimal_path`), and Eq. 7 then refines the carried contour at full
 resolution with κ1, r and the force unit measured on the start. It scores
-higher on the shared real images but over-segments the twin's sweep (+38 %
-in volume; not yet examined: the bar's and the floor's strong edges are the
-suspects), so it is not yet the default (``docs/decisions.md``). Tracking and the sweep's later planes
+higher on the shared real images, but the twin's sweep started with it comes
+out +38 % in volume (its later planes over-segment with the scales it hands
+on), so it is not yet the default (``docs/decisions.md``). Tracking and the sweep's later planes
 always use the balloon: their start, the previous contour, lies on the boundary.
 
 References
