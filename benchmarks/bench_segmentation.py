@@ -106,7 +106,7 @@ def method_spec(spec: str) -> tuple[str, dict]:
 
 
 def _one(args):
-    dataset, name, kind, method = args
+    dataset, name, kind, method, key = args
     from hifumotion.contour import ClickedPoints
     from hifumotion.io import read_mask, read_sequence
     from hifumotion.io.dataset import load_dataset
@@ -131,12 +131,7 @@ def _one(args):
     seconds = time.perf_counter() - t0
     s = score(mask, truth)
     return {"dataset": dataset, "image": name, "init": kind, "method": method, "dsc": s["dsc"], "hd95": s["hd95"],
-            "seconds": seconds, "shape": list(image.shape),
-            "key": _row_key(dataset, name, kind, item.image_path, item.mask_path)}
-
-
-def _row_key(dataset, name, kind, image_path, mask_path) -> str:
-    return f"{dataset}/{name}/{kind}/{_digest([image_path, mask_path])}"
+            "seconds": seconds, "shape": list(image.shape), "key": key}
 
 
 class RowCache:
@@ -202,14 +197,16 @@ def main(argv=None) -> int:
     jobs, rows = [], []
     for d in datasets:
         items = list(load_dataset(DATA / d))[: args.limit]
+        digests = {item.name: _digest([item.image_path, item.mask_path]) for item in items}  # read once
         for kind in args.inits.split(","):
             for m in everything:
                 for item in items:
-                    cached = caches[m].rows.get(_row_key(d, item.name, kind, item.image_path, item.mask_path))
+                    key = f"{d}/{item.name}/{kind}/{digests[item.name]}"
+                    cached = caches[m].rows.get(key)
                     if cached is not None:
                         rows.append(cached)
                     else:
-                        jobs.append((d, item.name, kind, m))
+                        jobs.append((d, item.name, kind, m, key))
     from_cache = len(rows)
     t0 = time.perf_counter()
     if jobs:
