@@ -27,6 +27,7 @@ QUICK = {
     "bench_bmode": ["--phantoms", "3", "--frames", "50"],
     "bench_particles": ["--steps", "150", "--json"],
     "bench_segmentation": ["--limit", "10"],
+    "bench_sweep": ["--methods", "glcv,gac"],
     "bench_twin": ["--preset", "small", "--json"],
     "bench_convergence": ["--preset", "small"],
     "bench_estimation": ["--preset", "small", "--modes", "glcv"],

@@ -208,6 +208,20 @@ def test_shift_boundary_moves_a_disc_edge_by_the_offset():
     assert shift_boundary(mask, 5.0, px).sum() == mask.sum()     # never erases the target
 
 
+def test_edge_offset_of_a_grown_disc_is_how_much_it_grew():
+    """Discs of known radii drawn on the pixel grid: the boundary of one 2.5 px bigger lies
+    2.5 px outside the smaller's (the mask's boundary, half a pixel beyond its edge pixels),
+    within the quarter pixel that distances between pixel centres can resolve."""
+    from hifumotion.experiment.boundary_offset import edge_offset_mm
+
+    rows, cols = np.mgrid[0:200, 0:200]
+    r = np.hypot(rows - 100.3, cols - 99.6)
+    truth = r <= 40.0
+    assert edge_offset_mm(truth, truth, 0.3) == pytest.approx(0.0, abs=0.075)
+    for grown_px in (2.5, -4.0):
+        assert edge_offset_mm(r <= 40.0 + grown_px, truth, 0.3) == pytest.approx(0.3 * grown_px, abs=0.075)
+
+
 def test_log_compressed_bmode_blooms_the_boundary_outwards():
     """A phantom of known shape in anechoic water: the segmented edge lies outside the true
     one (the PSF's tails show in a 50 dB display), by less than the lateral resolution."""
@@ -217,3 +231,20 @@ def test_log_compressed_bmode_blooms_the_boundary_outwards():
     off = measure_boundary_offset(imaging, "glcv", planes=3)
     assert 0.0 < off.offset_mm < imaging.lateral_fwhm_mm
     assert len(off.per_plane_mm) == 3 and off.std_mm < 0.5
+
+
+def test_rest_sweep_is_the_twins_sweep_without_its_physics(small_twin):
+    """The rest sweep images the same sample in the same planes as the full twin: its true
+    sections match the twin's (which settled under gravity first) and so does the clicked start."""
+    from hifumotion.experiment.rest_sweep import rest_sweep
+    from hifumotion.metrics import dice
+
+    _, twin = small_twin
+    rs = rest_sweep(twin.config)
+    assert rs.images.shape == twin.sweep.shape and rs.images.dtype == np.uint8
+    # the planes centre on the sample's mean z: its lattice here, the settled truth's there
+    np.testing.assert_allclose(rs.z_mm, twin.observed.sweep_z_mm, atol=0.2)
+    big = twin.sweep_masks.sum((1, 2)) > 0.3 * twin.sweep_masks.sum((1, 2)).max()
+    assert min(dice(a, b) for a, b in zip(rs.masks[big], twin.sweep_masks[big])) > 0.9
+    assert rs.volume_mm3 == pytest.approx(twin.parameters["facts"]["blob_volume_mm3"])
+    assert rs.start == int(np.argmin(np.abs(twin.observed.sweep_z_mm - twin.observed.setup.imaging.frames_plane_z_mm)))

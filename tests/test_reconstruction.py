@@ -111,6 +111,24 @@ def test_empty_end_slices_and_a_spurious_component():
     assert rec.volume_mm3 == pytest.approx(volume, rel=0.02)
 
 
+@pytest.mark.parametrize("offset_mm", [0.5, 0.07])
+def test_boundary_offset_moves_every_slice_inwards_in_plane(offset_mm):
+    """Slices of a sphere of radius R, each boundary moved inwards in its plane by δ: the body
+    whose slice at z has radius sqrt(R² − z²) − δ, volume ∫ π (sqrt(R² − z²) − δ)² dz (quadrature).
+    0.07 mm is a third of a pixel, which eroding the masks cannot express."""
+    radius = 8.0
+    inside = lambda x, y, z: x * x + y * y + z * z <= radius**2  # noqa: E731
+    masks, zs = slices(inside, radius, 1.0)
+    z = np.linspace(-radius, radius, 200001)
+    r = np.clip(np.sqrt(radius**2 - z**2) - offset_mm, 0, None)
+    trapezoid = getattr(np, "trapezoid", None) or np.trapz
+    expected = float(trapezoid(np.pi * r**2, z))
+    plain = reconstruct(masks, SPACING, zs).volume_mm3
+    moved = reconstruct(masks, SPACING, zs, boundary_offset_mm=offset_mm).volume_mm3
+    assert moved == pytest.approx(expected, rel=0.02)
+    assert plain - moved == pytest.approx(4 / 3 * np.pi * radius**3 - expected, rel=0.15)
+
+
 def test_bad_sweeps_are_clear_errors():
     inside, _, _, half = ellipsoid()
     masks, zs = slices(inside, half, 1.0)
@@ -122,3 +140,5 @@ def test_bad_sweeps_are_clear_errors():
         reconstruct(masks[:3], SPACING, [0.0, 1.0, 1.0])
     with pytest.raises(InputError, match="slice positions"):
         reconstruct(masks, SPACING, zs[:-1])
+    with pytest.raises(InputError, match="boundary offset"):
+        reconstruct(masks, SPACING, zs, boundary_offset_mm=50.0)

@@ -77,11 +77,60 @@ def test_sweep_segmentation_and_reconstruction_recover_the_tissue():
     present = sweep.truth.reshape(len(sweep.truth), -1).any(axis=1)
     assert present.sum() >= 6
     # the planes through the tissue's middle are segmented well
-    assert np.median(sweep.dsc) > 0.8
+    assert np.median(sweep.dsc) > 0.85
     # the model built from the segmented planes has about the true volume; from the true planes, nearly exactly
     from_truth = reconstruct(sweep.truth, sweep.spacing_mm, sweep.positions_mm)
     assert from_truth.volume_mm3 == pytest.approx(sweep.true_volume_mm3, rel=0.03)
     from_segmentation = reconstruct(sweep.masks, sweep.spacing_mm, sweep.positions_mm)
-    # GLCV over- or under-segments some planes (the ends especially): a loose bound on the volume
-    assert from_segmentation.volume_mm3 == pytest.approx(sweep.true_volume_mm3, rel=0.35)
+    # GLCV misses or over-segments some end planes of this low-contrast lesion: a looser bound
+    assert from_segmentation.volume_mm3 == pytest.approx(sweep.true_volume_mm3, rel=0.15)
     assert from_segmentation.mesh.is_watertight
+
+
+def test_inner_start_extrapolates_a_shrinking_section_and_never_grows_one():
+    """Discs of radius 34 then 30 px: the next section is predicted at 2·30 − 34 = 26 px and
+    the start lies 0.15 × 30 = 4.5 px inside that; a growing section keeps the last one's size."""
+    from hifumotion.segmentation.sweep import START_SHRINK, inner_start
+
+    rows, cols = np.mgrid[0:120, 0:120]
+    r = np.hypot(rows - 60.2, cols - 59.7)
+    start = inner_start(r <= 30, before=r <= 34)
+    assert np.sqrt(start.sum() / np.pi) == pytest.approx(26 - START_SHRINK * 30, abs=1.0)
+    grown = inner_start(r <= 30, before=r <= 25)
+    assert np.sqrt(grown.sum() / np.pi) == pytest.approx(30 - START_SHRINK * 30, abs=1.0)
+    assert not (grown & ~(r <= 30)).any()
+    # one plane only: the mask eroded
+    assert np.sqrt(inner_start(r <= 30).sum() / np.pi) == pytest.approx(30 * (1 - START_SHRINK), abs=1.0)
+
+
+def test_the_twins_sweep_reconstructs_the_samples_volume():
+    """The twin's sweep at rest (its own imaging, floor and resting bar), segmented with GLCV
+    from the clinician's contour as ``hifumotion run`` does, with the boundary offset measured on
+    a separate gel phantom: the reconstructed volume within 5 % of the sample's (quadrature of
+    its shape); without the offset it is too big (the log-compressed image blooms the edge)."""
+    from hifumotion.estimation.prepare import known_solid_mask
+    from hifumotion.experiment import twin_config
+    from hifumotion.experiment.boundary_offset import measure_boundary_offset
+    from hifumotion.experiment.rest_sweep import rest_sweep
+    from hifumotion.segmentation.sweep import segment_sweep
+
+    cfg = twin_config("small", seed=2)
+    rs = rest_sweep(cfg)
+    exclude = np.stack([known_solid_mask(rs.setup, z) for z in rs.z_mm])
+    seg = segment_sweep(rs.images, rs.initial_contour, rs.start, "glcv", spacing=rs.pixel_mm, exclude=exclude)
+    present = rs.masks.reshape(len(rs.masks), -1).any(axis=1)
+    assert not (seg.present & ~present).any()          # never beyond the tissue's ends
+    offset = measure_boundary_offset(cfg.imaging, "glcv", planes=3).offset_mm
+    raw = reconstruct(seg.masks, rs.pixel_mm, rs.z_mm).volume_mm3
+    corrected = reconstruct(seg.masks, rs.pixel_mm, rs.z_mm, boundary_offset_mm=offset).volume_mm3
+    assert raw > rs.volume_mm3
+    assert corrected == pytest.approx(rs.volume_mm3, rel=0.05)
+
+
+def test_bad_plane_start_is_a_clear_error():
+    from hifumotion.errors import InputError
+    from hifumotion.segmentation.sweep import segment_sweep
+
+    images = np.zeros((3, 40, 40))
+    with pytest.raises(InputError, match="plane_start"):
+        segment_sweep(images, np.ones((40, 40), bool), 1, "glcv", plane_start="outside")

@@ -128,6 +128,14 @@ def frame_solids(observed: Observed):
     return solids
 
 
+def known_solid_mask(setup, z_mm: float) -> np.ndarray:
+    """``(H, W)`` bool: what the operator knows cannot be tissue in the plane at ``z_mm`` (the
+    pool's floor, and the bar where it rests, grown by :data:`BAR_MARGIN_MM`), from ``setup.json``."""
+    from hifumotion.observed.solids import imaging_plane, known_solids
+
+    return known_solids(imaging_plane(setup, z_mm), setup, BAR_MARGIN_MM).any
+
+
 def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
             progress: Progress | None = None, boundary_offset_mm: float = 0.0,
             tracking: str = "speckle") -> Observation:
@@ -148,15 +156,12 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     px = observed.pixel_mm
     init = observed.initial_contour
 
-    from hifumotion.observed.solids import imaging_plane, known_solids
-
     if tracking not in ("speckle", "glcv"):
         raise InputError(f"unknown tracking {tracking!r}; expected speckle or glcv", "tracking")
     t0 = time.perf_counter()
     start = int(np.argmin(np.abs(observed.sweep_z_mm - z_frames)))
-    # what the operator knows cannot be tissue: the floor, and the bar where it rests
     def solid(z):
-        return known_solids(imaging_plane(observed.setup, z), observed.setup, BAR_MARGIN_MM).any
+        return known_solid_mask(observed.setup, z)
 
     exclude = np.stack([solid(z) for z in observed.sweep_z_mm])
     sweep = segment_sweep(observed.sweep, init, start, method, spacing=px, exclude=exclude)
@@ -164,12 +169,13 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     timings["segment_sweep_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    if boundary_offset_mm:
-        sweep.masks = np.stack([shift_boundary(m, boundary_offset_mm, px) if m.any() else m for m in sweep.masks])
     if sweep.present.sum() < 2:
         raise InputError("the sweep's segmentation holds the tissue in fewer than two planes; "
                          "check the initial contour", "sweep")
-    rec = reconstruct(sweep.masks, px, observed.sweep_z_mm)
+    # the surface moves inwards by the offset at sub-pixel accuracy; the stored masks by whole pixels
+    rec = reconstruct(sweep.masks, px, observed.sweep_z_mm, boundary_offset_mm=boundary_offset_mm)
+    if boundary_offset_mm:
+        sweep.masks = np.stack([shift_boundary(m, boundary_offset_mm, px) if m.any() else m for m in sweep.masks])
     tell("reconstruct", 1.0)
     timings["reconstruct_s"] = time.perf_counter() - t1
 
@@ -200,4 +206,4 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     return Observation(observed, sweep, rec, offset, masks, source, timings, motion)
 
 
-__all__ = ["Observation", "frame_solids", "prepare", "read_user_contours"]
+__all__ = ["Observation", "frame_solids", "known_solid_mask", "prepare", "read_user_contours"]

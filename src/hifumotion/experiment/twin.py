@@ -267,6 +267,52 @@ def truth_sections(truth: TruthRun, probe: im.Probe, progress: Callable[[float],
     return frames, sweep
 
 
+def operator_setup(cfg: TwinConfig, probe: im.Probe, tip_mm: np.ndarray, axis: np.ndarray, frames: int) -> Setup:
+    """``setup.json``: what the operator knows (image geometry and timing, the pool, the bar's
+    shape and resting place, the shape of its push but not its magnitude)."""
+    return Setup(
+        description="What the operator of the HIFU device knows: image geometry and timing, the pool, the bar's "
+                    "shape, where it starts and the shape of its push (not how hard it is). Pool frame in mm, y up; "
+                    "image rows run upwards from the probe (depth), columns along x.",
+        frame_interval_s=1.0 / cfg.imaging.frame_rate_hz, frames=int(frames), initial_contour_frame=0,
+        imaging=ImagingGeometry(**probe.as_dict()),
+        tank=TankSetup(size_mm=tuple(cfg.tank.size_mm), water_depth_mm=cfg.tank.water_depth_mm),
+        bar=BarSetup(enabled=cfg.bar.enabled, radius_mm=cfg.bar.radius_mm, length_mm=cfg.bar.length_mm,
+                     direction=tuple(np.asarray(axis).tolist()), tip_at_rest_mm=tuple(np.asarray(tip_mm).tolist())
+                     if cfg.bar.enabled else tuple(0.5 * np.asarray(cfg.tank.size_mm)),
+                     weight_supported=cfg.bar.weight_supported),
+        push=push_shape(cfg.bar))
+
+
+def echo_maps(cfg: TwinConfig, probe: im.Probe, tip_mm: np.ndarray, axis: np.ndarray,
+              seeds: np.ndarray) -> Callable[[float, np.ndarray], im.EchoMap]:
+    """``echo_map(z_mm, tissue_mask)``: the backscatter of the plane at ``z_mm`` (tissue with its
+    seeded texture, water, the floor and the bar at rest)."""
+    size = np.asarray(cfg.tank.size_mm)
+    texture = im.Texture(-np.full(3, 2.0), size + 2.0, cfg.imaging.echo_texture, np.random.default_rng(seeds[1]))
+
+    def echo_map(z: float, tissue_mask: np.ndarray) -> im.EchoMap:
+        bar = (im.bar_mask(probe, z, tip_mm, axis, cfg.bar.radius_mm, cfg.bar.length_mm) if cfg.bar.enabled
+               else np.zeros(probe.shape, bool))
+        return im.EchoMap(cfg.imaging, probe, z, tissue_mask, bar, cfg.tank.water_depth_mm, texture)
+
+    return echo_map
+
+
+def sweep_images(probe: im.Probe, sweep_masks: np.ndarray, echo_map, trans, seeds: np.ndarray,
+                 progress: Callable[[float], None] | None = None) -> np.ndarray:
+    """The B-mode images (uint8 ``(S, H, W)``) of the sweep's planes, each with its own scatterers."""
+    extent = (probe.shape[0] * probe.pixel_mm, probe.shape[1] * probe.pixel_mm)
+    images = []
+    for k, z in enumerate(probe.sweep_z_mm):
+        scat = im.Scatterers.uniform(extent, trans, int(seeds[2]) + k)
+        images.append(im.render(echo_map(z, sweep_masks[k]), scat, None, probe, trans, int(seeds[3]),
+                                sweep_masks[k]).image)
+        if progress is not None:
+            progress((k + 1) / len(sweep_masks))
+    return np.stack(images)
+
+
 def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None = None) -> TwinResult:
     """Run the experiment (module docstring) and write ``folder/observed`` and ``folder/truth``.
 
@@ -311,22 +357,12 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     axis = np.asarray(facts["bar_axis"]) if cfg.bar.enabled else np.array([0.0, -1.0, 0.0])
     tip0 = np.asarray(facts["bar_tip_mm"]) if cfg.bar.enabled else np.full(3, 1e9)
     bar_shift = sim.bar_centre_mm - sim.bar_centre_mm[0] if cfg.bar.enabled else np.zeros((len(times), 3))
-    size = np.asarray(cfg.tank.size_mm)
-    texture = im.Texture(-np.full(3, 2.0), size + 2.0, cfg.imaging.echo_texture, np.random.default_rng(seeds[1]))
+    echo_map = echo_maps(cfg, probe, tip0, axis, seeds)
     trans = im.transducer(cfg.imaging, probe, rest)
     extent = (probe.shape[0] * probe.pixel_mm, probe.shape[1] * probe.pixel_mm)
-
-    def echo_map(z: float, tissue_mask: np.ndarray) -> im.EchoMap:
-        bar = (im.bar_mask(probe, z, tip0, axis, cfg.bar.radius_mm, cfg.bar.length_mm) if cfg.bar.enabled
-               else np.zeros(probe.shape, bool))
-        return im.EchoMap(cfg.imaging, probe, z, tissue_mask, bar, cfg.tank.water_depth_mm, texture)
-
-    sweep_images = []
-    for k, z in enumerate(probe.sweep_z_mm):
-        echo = echo_map(z, sweep_masks[k])
-        scat = im.Scatterers.uniform(extent, trans, int(seeds[2]) + k)
-        sweep_images.append(im.render(echo, scat, None, probe, trans, int(seeds[3]), sweep_masks[k]).image)
-        tell("images", (k + 1) / (len(probe.sweep_z_mm) + len(times)))
+    n_images = len(probe.sweep_z_mm) + len(times)
+    sweep = sweep_images(probe, sweep_masks, echo_map, trans, seeds,
+                         lambda f: tell("images", f * len(sweep_masks) / n_images))
     z0 = probe.z_frames_mm
     echo0 = echo_map(z0, frame_masks[0])
     speckle = im.MovingSpeckle(echo0, im.Scatterers.uniform(extent, trans, int(seeds[4])), rest, dx)
@@ -334,9 +370,8 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     for k in range(len(times)):
         pos = speckle.positions(sim.tissue_mm[k], bar_shift[k])
         frames.append(im.render(echo0, speckle.scatterers, pos, probe, trans, int(seeds[5]), frame_masks[k]).image)
-        tell("images", (len(probe.sweep_z_mm) + k + 1) / (len(probe.sweep_z_mm) + len(times)))
+        tell("images", (len(probe.sweep_z_mm) + k + 1) / n_images)
     frames = np.stack(frames)
-    sweep = np.stack(sweep_images)
     clicked = clinician_contour(frame_secs[0].contour_mm, cfg.clinician.points, cfg.clinician.error_mm,
                                 np.random.default_rng(seeds[6]))
     timings["images_s"] = time.perf_counter() - t3
@@ -345,18 +380,7 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     t4 = time.perf_counter()
     px = probe.pixel_mm
     interval = 1.0 / cfg.imaging.frame_rate_hz
-    setup = Setup(
-        description="What the operator of the HIFU device knows: image geometry and timing, the pool, the bar's "
-                    "shape, where it starts and the shape of its push (not how hard it is). Pool frame in mm, y up; "
-                    "image rows run upwards from the probe (depth), columns along x.",
-        frame_interval_s=interval, frames=int(len(times)), initial_contour_frame=0,
-        imaging=ImagingGeometry(**probe.as_dict()),
-        tank=TankSetup(size_mm=tuple(cfg.tank.size_mm), water_depth_mm=cfg.tank.water_depth_mm),
-        bar=BarSetup(enabled=cfg.bar.enabled, radius_mm=cfg.bar.radius_mm, length_mm=cfg.bar.length_mm,
-                     direction=tuple(axis.tolist()), tip_at_rest_mm=tuple(tip0.tolist()) if cfg.bar.enabled
-                     else tuple(0.5 * np.asarray(cfg.tank.size_mm)), weight_supported=cfg.bar.weight_supported),
-        # how the push is applied, not how hard: the force rises linearly over this time, then holds
-        push=push_shape(cfg.bar))
+    setup = operator_setup(cfg, probe, tip0, axis, len(times))
     observed = Observed(sweep, np.asarray(probe.sweep_z_mm, float), frames, Contour.from_mm(clicked, px), setup)
     write_observed(obs, setup, sweep, observed.sweep_z_mm, frames, observed.initial_contour)
     write_png_stack(tru / "frames", frame_masks, prefix="frame_", digits=4)

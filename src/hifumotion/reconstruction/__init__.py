@@ -201,7 +201,8 @@ def _interpolate_along_z(z: np.ndarray, planes: np.ndarray, zs: np.ndarray, kind
 
 
 def reconstruct(masks: Any, spacing_mm: Any, slice_positions_mm: Any, voxel_mm: float | None = None,
-                smoothing_iterations: int = 10, interpolation: str = "cubic") -> Reconstruction:
+                smoothing_iterations: int = 10, interpolation: str = "cubic",
+                boundary_offset_mm: float = 0.0) -> Reconstruction:
     """Reconstruct the tissue from N parallel segmented slices.
 
     Parameters
@@ -221,6 +222,12 @@ def reconstruct(masks: Any, spacing_mm: Any, slice_positions_mm: Any, voxel_mm: 
     interpolation
         ``"cubic"`` (default) or ``"linear"`` interpolation of the signed
         distances between slices (see :func:`_interpolate_along_z`).
+    boundary_offset_mm
+        How far outside the true boundary the masks' boundaries lie (mm; the imaging
+        system's offset measured on a phantom,
+        :func:`~hifumotion.experiment.boundary_offset.measure_boundary_offset`): every
+        slice's signed distance is lowered by it, which moves the surface inwards by that
+        much at sub-pixel accuracy (an eroded mask moves it by whole pixels only).
 
     Returns
     -------
@@ -281,7 +288,10 @@ def reconstruct(masks: Any, spacing_mm: Any, slice_positions_mm: Any, voxel_mm: 
     notes += cleaned
 
     # in-plane signed distances, on the slices' own grid
-    d = np.stack([_slice_distance_mm(s, (row_mm, col_mm)) for s in m])
+    d = np.stack([_slice_distance_mm(s, (row_mm, col_mm)) for s in m]) - float(boundary_offset_mm)
+    if not (d > 0).any():
+        raise InputError(f"a boundary offset of {boundary_offset_mm:g} mm leaves no tissue in any slice",
+                         "boundary_offset_mm")
     # caps: a virtual slice one gap beyond each end, extrapolating the shape's trend, never inside
     gap_lo, gap_hi = pos[1] - pos[0], pos[-1] - pos[-2]
     cap_lo = np.minimum(2 * d[0] - d[1], -0.5 * gap_lo)
