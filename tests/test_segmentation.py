@@ -184,3 +184,17 @@ def test_compiled_loop_matches_the_python_loop(method, monkeypatch):
     slow = segment(img, init, method)
     assert fast.iterations == slow.iterations
     assert np.array_equal(fast.mask, slow.mask)
+
+
+@pytest.mark.parametrize("mode", ["nearest", "constant"])
+def test_gaussian_is_scipys_gaussian_filter(mode):
+    """The models' smoothing (OpenCV's filter) against SciPy's, an independent implementation."""
+    from scipy import ndimage
+
+    from hifumotion.segmentation._common import gaussian
+
+    image = np.random.default_rng(3).random((90, 130))
+    for sigma, truncate in ((0.8, 4.0), (6.5, 4.0), (9.0, 3.0)):
+        expected = ndimage.gaussian_filter(image, sigma, mode=mode, truncate=truncate)
+        assert np.abs(gaussian(image, sigma, mode, truncate) - expected).max() < 1e-6
+        assert np.abs(gaussian(image, sigma, mode, truncate, precise=True) - expected).max() < 1e-12

@@ -38,7 +38,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from hifumotion.errors import InputError
 from hifumotion.segmentation import _kernels as K
@@ -46,6 +45,7 @@ from hifumotion.segmentation._common import (
     SegmentationResult,
     edge_indicator,
     equivalent_radius_px,
+    gaussian,
     prepare_image,
     run_narrow_band,
 )
@@ -58,7 +58,7 @@ SIGMA_FRACTION = 0.2
 #: Balloon weight α of Eq. 7 (> 0 expands: the initial contour is inside the target).
 ALPHA = 0.3
 #: Iterations of Eq. 7 refining the globally carried contour (at full resolution, 0.45 px each).
-REFINE_ITERATIONS = 60
+REFINE_ITERATIONS = 20
 CARRIES = ("global", "balloon")
 
 
@@ -154,7 +154,7 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
         s = params.setdefault("sigma_px", sigma or max(1.0, SIGMA_FRACTION * equivalent_radius_px(phi) * factor))
         force = region_force(img, phi, factor, params, radius, form)
         k1 = params.setdefault("kappa1", kappa1 if kappa1 is not None else params["edge_contrast"])
-        smooth = ndimage.gaussian_filter(img, max(s / factor, 0.5), mode="nearest")
+        smooth = gaussian(img, max(s / factor, 0.5))
         g, gx, gy = edge_indicator(img, max(s / factor, 0.5), smooth)
         if balloon == "target":
             if "model" not in learned:  # from the initial contour, on the coarsest level

@@ -11,7 +11,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from hifumotion.errors import InputError
 
@@ -19,6 +18,7 @@ from hifumotion.segmentation._common import (
     LocalStatistics,
     SegmentationResult,
     equivalent_radius_px,
+    gaussian,
     intensity_scale,
     run_narrow_band,
 )
@@ -146,7 +146,7 @@ def region_force(img: np.ndarray, phi: np.ndarray, factor: int, params: dict, ra
         params["edge_contrast"], params["force_scale"] = force_scale(stats, phi, img)
     point_image = None
     if form == "smoothed":
-        point_image = ndimage.gaussian_filter(img, max(SMOOTHING_FRACTION * r / factor, 0.5), mode="nearest")
+        point_image = gaussian(img, max(SMOOTHING_FRACTION * r / factor, 0.5))
     return RegionForce(stats, params["force_scale"], form == "integral", point_image)
 
 

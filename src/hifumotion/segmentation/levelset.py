@@ -64,8 +64,19 @@ def _segments_of_polygon(points: np.ndarray) -> np.ndarray:
 def phi_from_mask(mask: np.ndarray, width: float = BAND) -> np.ndarray:
     """Signed distance to the 0.5 iso-line of a binary mask (positive inside), clamped to ±(width+1)."""
     m = as_mask(mask, "initial mask")
-    phi = np.where(m, 0.5, -0.5).astype(np.float32)
-    return redistance(phi, width)
+    far = width + 1.0
+    # ±far crosses zero half-way between pixels, as ±0.5 does: the same segments, and the
+    # pixels beyond the mask's box need no pass (they are farther than the band)
+    phi = np.where(m, far, -far).astype(np.float32)
+    rows, cols = np.flatnonzero(m.any(axis=1)), np.flatnonzero(m.any(axis=0))
+    if rows.size == 0:
+        return phi
+    grow = int(np.ceil(far)) + 1
+    h, w = m.shape
+    segments = K.interface_segments(phi, rows[0] - 1, rows[-1] + 2, cols[0] - 1, cols[-1] + 2)
+    K.redistance_box(phi, segments, float(width), max(rows[0] - grow, 0), min(rows[-1] + grow + 1, h),
+                     max(cols[0] - grow, 0), min(cols[-1] + grow + 1, w))
+    return phi
 
 
 def phi_from_contour(points_px: np.ndarray, shape: tuple[int, int], width: float = BAND) -> np.ndarray:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from hifumotion.segmentation._common import equivalent_radius_px, make_result, prepare_image
+from hifumotion.segmentation._common import equivalent_radius_px, gaussian, make_result, prepare_image
 from hifumotion.segmentation.levelset import initial_phi
 
 #: σ of the kernel K_σ as a fraction of the initial equivalent radius (Li et al. use 3 px on small images).
@@ -61,9 +61,10 @@ def rsf(image: Any, init: Any, *, sigma: float | None = None, lambda1: float = 1
     phi = np.where(inside, c0, -c0).astype(np.float64)
 
     def smooth(a):
-        return ndimage.gaussian_filter(a, s, mode="constant", truncate=3.0)
+        return gaussian(a, s, mode="constant", truncate=3.0, precise=True)
 
     k_one = smooth(np.ones_like(img))
+    k_img = smooth(img)  # constant: the image does not change
     img2 = img * img
     previous = inside.copy()
     converged = False
@@ -73,7 +74,7 @@ def rsf(image: Any, init: Any, *, sigma: float | None = None, lambda1: float = 1
         dlt = (epsilon / np.pi) / (epsilon**2 + phi**2)
         kh, khi = smooth(h), smooth(h * img)
         f1 = khi / (kh + 1e-10)
-        f2 = (smooth(img) - khi) / (k_one - kh + 1e-10)
+        f2 = (k_img - khi) / (k_one - kh + 1e-10)
         e1 = img2 * k_one - 2.0 * img * smooth(f1) + smooth(f1 * f1)
         e2 = img2 * k_one - 2.0 * img * smooth(f2) + smooth(f2 * f2)
         kappa = _curvature(phi)
