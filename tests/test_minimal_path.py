@@ -87,10 +87,10 @@ def test_glcv_carried_globally_and_by_its_balloon_find_the_target_in_speckle():
     truth = star((200, 220), 112.0, 96.0, 55.0, ((3, 0.12, 0.3), (5, 0.05, 1.1)))
     img = speckled(truth, 0.35, 1.0, seed=5)
     start = Ellipse(108, 100, 30, 26, 15)
-    carried = segment(img, start, "glcv", carry="global")
+    carried = segment(img, start, "glcv")  # the default
     assert carried.params["carry"] == "global" and carried.params["geodesic_length_px"] > 0
     assert dice(carried.mask, truth) > 0.97
-    balloon = segment(img, start, "glcv")  # the paper's way, the default
+    balloon = segment(img, start, "glcv", carry="balloon")  # the paper's way
     assert balloon.params["carry"] == "balloon"
     assert dice(carried.mask, truth) >= dice(balloon.mask, truth)
     with pytest.raises(InputError, match="carry"):

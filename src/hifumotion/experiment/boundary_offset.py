@@ -66,13 +66,15 @@ def measure_boundary_offset(imaging: ImagingConfig, method: str = "glcv", semi_a
     along x, y up, z) imaged with ``imaging`` and return the mean signed distance of the
     segmented boundary from the true one over ``planes`` planes through its middle.
 
-    Each plane is segmented with ``method`` from a clinician's rough clicks (``clicks``
-    points, radial error ``click_error_mm``), the pixels below the floor excluded, as the
-    pipeline segments a sweep; ``params`` are the method's own (as :func:`~hifumotion.segmentation.segment`)."""
+    The planes are segmented as the pipeline segments a sweep
+    (:func:`~hifumotion.segmentation.sweep.segment_sweep`): the middle one with ``method`` from
+    a clinician's rough clicks (``clicks`` points, radial error ``click_error_mm``), the others
+    from it plane by plane, the pixels below the floor excluded; ``params`` are the method's own
+    (as :func:`~hifumotion.segmentation.segment`)."""
     from hifumotion.contour import Contour
     from hifumotion.experiment import imaging as im
     from hifumotion.experiment.twin import clinician_contour
-    from hifumotion.segmentation import segment
+    from hifumotion.segmentation.sweep import segment_sweep
 
     rng = np.random.default_rng(seed)
     a, b, c = (float(v) for v in semi_axes_mm)
@@ -87,18 +89,22 @@ def measure_boundary_offset(imaging: ImagingConfig, method: str = "glcv", semi_a
     texture = im.Texture(shell.min(0) - 5, shell.max(0) + 5, imaging.echo_texture, rng)
     extent = (probe.shape[0] * probe.pixel_mm, probe.shape[1] * probe.pixel_mm)
     px = probe.pixel_mm
-    offsets = []
-    for k, z in enumerate(np.linspace(-0.5 * c, 0.5 * c, planes)):
+    images, truths, floors = [], [], []
+    for z in np.linspace(-0.5 * c, 0.5 * c, planes):
         pts = probe.plane(z).points_mm()
         rel = (pts - centre) / np.array([a, b, c])
         truth = ((rel ** 2).sum(-1) <= 1.0) & (pts[..., 1] >= 0.0)
         echo = im.EchoMap(imaging, probe, z, truth, np.zeros(probe.shape, bool), water_depth_mm, texture)
         scat = im.Scatterers.uniform(extent, trans, int(rng.integers(2**31)))
-        image = im.render(echo, scat, None, probe, trans, int(rng.integers(2**31)), truth).image
-        contour = Contour.from_mask(truth, px)
-        clicked = clinician_contour(contour.points_px * px, clicks, click_error_mm, rng)
-        mask = segment(image, Contour.from_mm(clicked, px), method, spacing=px, **params).mask & (pts[..., 1] >= 0.0)
-        offsets.append(edge_offset_mm(mask, truth, px))
+        images.append(im.render(echo, scat, None, probe, trans, int(rng.integers(2**31)), truth).image)
+        truths.append(truth)
+        floors.append(pts[..., 1] < 0.0)
+    middle = planes // 2
+    contour = Contour.from_mask(truths[middle], px)
+    clicked = clinician_contour(contour.points_px * px, clicks, click_error_mm, rng)
+    masks = segment_sweep(np.stack(images), Contour.from_mm(clicked, px), middle, method, spacing=px,
+                          exclude=np.stack(floors), **params).masks
+    offsets = [edge_offset_mm(m, t, px) for m, t in zip(masks, truths) if m.any()]
     return BoundaryOffset(float(np.mean(offsets)), float(np.std(offsets)), tuple(offsets), method)
 
 

@@ -11,16 +11,16 @@ is the paper's form; ``docs/decisions.md``).
 
 From a rough start drawn inside the target, every point of the start sees
 uniform tissue (t(x) = 1 along it, by κ1's definition): the geodesic term
-alone must carry the whole contour to the boundary. ``carry="balloon"``
-(default) is the paper's way: Eq. 7's flow from the start, the balloon doing
-the carrying. ``carry="global"`` does it exactly, by the GAC's global solver
-(the closed curve of least geodesic length around the start,
-:mod:`._minimal_path`), and Eq. 7 then refines the carried contour at full
-resolution with κ1, r and the force unit measured on the start. It scores
-higher on the shared real images, but the twin's sweep started with it comes
-out +38 % in volume (its later planes over-segment with the scales it hands
-on), so it is not yet the default (``docs/decisions.md``). Tracking and the sweep's later planes
-always use the balloon: their start, the previous contour, lies on the boundary.
+alone must carry the whole contour to the boundary. ``carry="global"``
+(default) does it exactly, by the GAC's global solver (the closed curve of least
+geodesic length around the start, :mod:`._minimal_path`), and Eq. 7 then
+refines the carried contour at full resolution with κ1, r and the force unit
+measured on the start. ``carry="balloon"`` is the paper's way: Eq. 7's flow from
+the start, the balloon doing the carrying. On the shared real images the global
+carry scores 0.02–0.06 higher in mean DSC at a third to a fifth of the time; on
+small sections in low-contrast texture it can take an outer edge, so the
+sweep's later planes and tracked frames use the balloon (their start is a
+previous contour, on or near the boundary; ``docs/decisions.md``).
 
 References
 ----------
@@ -93,7 +93,7 @@ class TargetModel:
 
 def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, alpha: float = ALPHA,
          kappa1: float | None = None, sigma: float | None = None, balloon: str = "target", form: str = "smoothed",
-         carry: str = "balloon", multiscale: bool = True,
+         carry: str = "global", multiscale: bool = True,
          max_iterations: int | None = None, spacing=None) -> SegmentationResult:
     """Segment with GLCV (Eq. 6–7).
 
@@ -123,9 +123,9 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
     form
         How LCV's integral (Eq. 5) is evaluated, see :func:`~hifumotion.segmentation.lcv.region_force`.
     carry
-        ``"balloon"`` (default): Eq. 7's flow from the start; ``"global"``: the GAC's global
-        solver carries the start to the boundary, then :data:`REFINE_ITERATIONS` of Eq. 7
-        refine it (see the module).
+        ``"global"`` (default): the GAC's global solver carries the start to the boundary,
+        then :data:`REFINE_ITERATIONS` of Eq. 7 refine it; ``"balloon"``: Eq. 7's flow from
+        the start (see the module).
     multiscale
         Run coarse to fine (a numerical acceleration; see ``docs/decisions.md``); ``carry="balloon"`` only.
     max_iterations

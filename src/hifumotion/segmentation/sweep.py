@@ -43,6 +43,10 @@ PLANE_ITERATIONS = 150
 #: region term or a global solve): their later planes start inside (``plane_start="inside"``).
 CARRY_FROM_INSIDE = ("gac", "cv", "glcv")
 PLANE_STARTS = ("inside", "neighbour")
+#: How a later plane is segmented from its inside start, where that differs from the first plane:
+#: GLCV's balloon, which stops where the tissue stops looking like the target, and not the global
+#: geodesic, which took an outer edge on small end sections in low-contrast texture (``docs/decisions.md``).
+INSIDE_PLANE_PARAMS = {"glcv": {"carry": "balloon"}}
 
 
 def region_contrast(image: np.ndarray, mask: np.ndarray, ring_px: int = 8) -> float:
@@ -154,7 +158,7 @@ def segment_sweep(images: Any, init: Any, start: int, method: str = "glcv", spac
     masks[start] = first_mask
     contrast[start] = reference = region_contrast(imgs[start], first_mask)
     if how == "inside":
-        later, start_from = dict(params), inner_start
+        later, start_from = {**INSIDE_PLANE_PARAMS.get(method.lower(), {}), **params}, inner_start
     else:  # the neighbour's mask lies on the boundary: its scales would be the boundary's
         scale = {arg: first.params[key] for key, arg in
                  (("radius_px", "radius"), ("sigma_px", "sigma"), ("kappa1", "kappa1")) if key in first.params}
