@@ -9,9 +9,9 @@ from its surroundings — there the sweep has left the tissue.
 With the models that carry a start from inside the target to its boundary
 (GAC, CV, GLCV), every later plane is segmented the way the first is, from a
 start inside its section, with the scales (local radius, σ, κ1) its own start
-gives: the neighbour's mask eroded by :data:`START_SHRINK` of its equivalent
-radius (neighbouring sections of a body differ by less than that when the
-planes are closer than the body is wide). Starting from the neighbour's mask
+gives: the section predicted from the two planes before (:func:`inner_start`)
+eroded by :data:`START_SHRINK` of its equivalent radius (GLCV's later planes are
+carried by its balloon, :data:`INSIDE_PLANE_PARAMS`). Starting from the neighbour's mask
 itself, as a tracked frame starts from the previous frame, puts the start on or
 outside the next section's boundary wherever the sections shrink — towards the
 ends of the sweep, by a whole plane's difference — and GLCV's balloon, with the
