@@ -198,3 +198,23 @@ def test_gaussian_is_scipys_gaussian_filter(mode):
         expected = ndimage.gaussian_filter(image, sigma, mode=mode, truncate=truncate)
         assert np.abs(gaussian(image, sigma, mode, truncate) - expected).max() < 1e-6
         assert np.abs(gaussian(image, sigma, mode, truncate, precise=True) - expected).max() < 1e-12
+
+
+def test_estimate_shift_finds_a_known_translation_of_speckle():
+    """A speckle pattern moved by a known whole-pixel shift, and scikit-image's registration
+    of the same window (an independent implementation) agree with it."""
+    from scipy import ndimage
+    from skimage.registration import phase_cross_correlation
+
+    from hifumotion.segmentation import estimate_shift
+
+    rng = np.random.default_rng(4)
+    base = ndimage.gaussian_filter(rng.standard_normal((200, 220)), 1.2)
+    mask = np.zeros((160, 160), bool)
+    mask[50:110, 45:115] = True
+    for dr, dc in ((3, -5), (-7, 2), (0, 0)):
+        previous = base[20:180, 30:190]
+        current = base[20 - dr:180 - dr, 30 - dc:190 - dc]
+        assert estimate_shift(previous, current, mask) == pytest.approx([dr, dc])
+        expected, _, _ = phase_cross_correlation(current, previous, normalization=None)
+        assert np.allclose(expected, [dr, dc])

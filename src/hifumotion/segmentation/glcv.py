@@ -17,7 +17,7 @@ geodesic length around the start, :mod:`._minimal_path`), and Eq. 7 then
 refines the carried contour at full resolution with κ1, r and the force unit
 measured on the start. ``carry="balloon"`` is the paper's way: Eq. 7's flow from
 the start, the balloon doing the carrying. On the shared real images the global
-carry scores 0.02–0.06 higher in mean DSC at a third to a fifth of the time; on
+carry scores 0.02–0.06 higher in mean DSC in a quarter to half the time; on
 small sections in low-contrast texture it can take an outer edge, so the
 sweep's later planes and tracked frames use the balloon (their start is a
 previous contour, on or near the boundary; ``docs/decisions.md``).
