@@ -32,6 +32,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
+from bench_segmentation import method_spec as parse_method  # "glcv+plane_start=neighbour"
 
 #: The twins: (preset, overrides). Seeds, shapes, pixel sizes, plane gaps and bars differ.
 TWINS: dict[str, tuple[str, dict]] = {
@@ -57,12 +58,6 @@ def _offset(cfg, method: str, params: dict) -> float:
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
 
     return float(measure_boundary_offset(cfg.imaging, method, **params).offset_mm)
-
-
-def parse_method(spec: str) -> tuple[str, dict]:
-    """``"glcv+plane_start=neighbour"`` → ``("glcv", {"plane_start": "neighbour"})``."""
-    name, *pairs = spec.split("+")
-    return name, dict(p.split("=", 1) for p in pairs)
 
 
 def run_twin(name: str, methods: list[str]) -> dict:
@@ -143,15 +138,21 @@ def main(argv=None) -> int:
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     twins = [t.strip() for t in args.twins.split(",") if t.strip()]
-    bad = [m for m in methods if parse_method(m)[0] not in METHODS or any("=" not in p for p in m.split("+")[1:])]
+    bad = [m for m in methods if any("=" not in p for p in m.split("+")[1:]) or parse_method(m)[0] not in METHODS]
     bad += [t for t in twins if t not in TWINS]
     if bad:
         print(f"bench_sweep: unknown {', '.join(bad)}; methods: {', '.join(METHODS)}; twins: {', '.join(TWINS)}",
               file=sys.stderr)
         return 2
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        rows = list(pool.map(run_twin, twins, [methods] * len(twins)))
+    from hifumotion.errors import InputError
+
+    try:
+        with ProcessPoolExecutor(max_workers=args.workers) as pool:
+            rows = list(pool.map(run_twin, twins, [methods] * len(twins)))
+    except InputError as err:
+        print(f"bench_sweep: {err}", file=sys.stderr)
+        return 2
     print(json.dumps({"benchmark": "sweep", "methods": methods, "twins": rows, "summary": summary(rows, methods),
                       "seconds": time.perf_counter() - t0}, indent=1))
     return 0
