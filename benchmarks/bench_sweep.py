@@ -26,6 +26,7 @@ Target (issue 20): GLCV's reconstructed volume within 5 % of the truth on every 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -54,10 +55,15 @@ def _config(name: str):
     return twin_config(preset, overrides)
 
 
-def _offset(cfg, method: str, params: dict) -> float:
+@functools.lru_cache(maxsize=None)
+def _offset(imaging_json: str, spec: str) -> float:
+    """The phantom's boundary offset (mm) for these imaging settings and method spec: twins that
+    share their imaging share it, so each is measured once per worker."""
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
+    from hifumotion.experiment.config import ImagingConfig
 
-    return float(measure_boundary_offset(cfg.imaging, method, **params).offset_mm)
+    method, params = parse_method(spec)
+    return float(measure_boundary_offset(ImagingConfig.model_validate_json(imaging_json), method, **params).offset_mm)
 
 
 def run_twin(name: str, methods: list[str]) -> dict:
@@ -96,7 +102,7 @@ def run_twin(name: str, methods: list[str]) -> dict:
         seg = segment_sweep(rs.images, rs.initial_contour, rs.start, method, spacing=rs.pixel_mm, exclude=exclude,
                             **params)
         seconds = time.perf_counter() - t
-        offset = _offset(cfg, method, params)
+        offset = _offset(cfg.imaging.model_dump_json(), spec)
         found = seg.present
         row["methods"][spec] = {
             "volume_error": volume_error(seg.masks),

@@ -160,10 +160,7 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
         raise InputError(f"unknown tracking {tracking!r}; expected speckle or glcv", "tracking")
     t0 = time.perf_counter()
     start = int(np.argmin(np.abs(observed.sweep_z_mm - z_frames)))
-    def solid(z):
-        return known_solid_mask(observed.setup, z)
-
-    exclude = np.stack([solid(z) for z in observed.sweep_z_mm])
+    exclude = np.stack([known_solid_mask(observed.setup, z) for z in observed.sweep_z_mm])
     sweep = segment_sweep(observed.sweep, init, start, method, spacing=px, exclude=exclude)
     tell("segment sweep", 1.0)
     timings["segment_sweep_s"] = time.perf_counter() - t0
@@ -195,7 +192,7 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
                         boundary_offset_mm=boundary_offset_mm, method=method)
         masks = motion.masks.copy()
     else:
-        masks = track(observed.frames, init, method, spacing=px, exclude=solid(z_frames)).masks
+        masks = track(observed.frames, init, method, spacing=px, exclude=known_solid_mask(observed.setup, z_frames)).masks
         if boundary_offset_mm:
             masks = np.stack([shift_boundary(m, boundary_offset_mm, px) for m in masks])
     for frame, m in given.items():
