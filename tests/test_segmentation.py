@@ -218,3 +218,48 @@ def test_estimate_shift_finds_a_known_translation_of_speckle():
         assert estimate_shift(previous, current, mask) == pytest.approx([dr, dc])
         expected, _, _ = phase_cross_correlation(current, previous, normalization=None)
         assert np.allclose(expected, [dr, dc])
+
+
+# --- RSF's fused step against the published formulas (computed with NumPy and SciPy) ----------
+
+
+def test_rsf_step_matches_li_et_al_formulas_term_by_term():
+    """The fused kernels expand λ1 e1 − λ2 e2 before smoothing and take their own differences;
+    the step must equal Li et al.'s flow written out with SciPy's filters and NumPy's gradient."""
+    import importlib
+
+    from scipy import ndimage
+
+    r = importlib.import_module("hifumotion.segmentation.rsf")  # the module, not the function of that name
+
+    rng = np.random.default_rng(4)
+    shape, sigma, eps, lam1, lam2, nu, mu, dt = (40, 52), 3.0, 1.0, 1.0, 2.0, 7.0, 0.5, 0.1
+    img = 255.0 * ndimage.gaussian_filter(rng.random(shape), 1.0)
+    phi = ndimage.gaussian_filter(rng.standard_normal(shape), 3.0) * 20.0
+
+    def k(a):
+        return ndimage.gaussian_filter(a, sigma, mode="constant", truncate=3.0)
+
+    # the published flow
+    h = 0.5 * (1 + (2 / np.pi) * np.arctan(phi / eps))
+    dlt = (eps / np.pi) / (eps**2 + phi**2)
+    f1 = k(h * img) / (k(h) + 1e-10)
+    f2 = k((1 - h) * img) / (k(1 - h) + 1e-10)
+    e1 = img**2 * k(np.ones(shape)) - 2 * img * k(f1) + k(f1**2)
+    e2 = img**2 * k(np.ones(shape)) - 2 * img * k(f2) + k(f2**2)
+    py, px = np.gradient(phi)
+    norm = np.sqrt(px**2 + py**2) + 1e-10
+    kappa = np.gradient(px / norm, axis=1) + np.gradient(py / norm, axis=0)
+    lap = ndimage.laplace(phi, mode="nearest")
+    expected = phi + dt * (-dlt * (lam1 * e1 - lam2 * e2) + nu * dlt * kappa + mu * (lap - kappa))
+
+    # the kernels
+    hh, hi, dd, a, b, nx, ny, out = (np.empty(shape) for _ in range(8))
+    r._heaviside_dirac(phi, img, eps, hh, hi, dd)
+    r._fitting_differences(k(hh), k(hi), k(img), k(np.ones(shape)), lam1, lam2, a, b)
+    r._unit_normal(phi, nx, ny)
+    img2k = (lam1 - lam2) * img * img * k(np.ones(shape))
+    r._step(phi, img, img2k, k(a), k(b), dd, nx, ny, nu, mu, dt, out)
+    step = np.abs(expected - phi).max()
+    assert step > 1.0  # the fitting force moves φ: the comparison is not of two near-zero updates
+    assert np.abs(out - expected).max() < 1e-9 * step, (np.abs(out - expected).max(), step)
