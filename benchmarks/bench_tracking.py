@@ -2,15 +2,16 @@
 
 A target (a lobed blob) translates and deforms over the frames under
 speckle-like correlated noise on an uneven background; ``track`` follows it
-from an ellipse on the first frame. Printed: milliseconds per frame (median
-and mean, first frame excluded since it starts from the rough ellipse),
-mean/min DSC against the known masks, and, for comparison in the same run,
+from an ellipse on the first frame. Printed: milliseconds per frame, first frame
+excluded since it starts from the rough ellipse: ``ms_per_frame_wall``, the wall time of
+``track`` per frame with the motion estimate and the result included, and the median
+and mean of the segmentation's own time; mean/min DSC against the known masks, and, for comparison in the same run,
 scikit-image's ``morphological_chan_vese`` started from the previous mask
 with the same per-frame iteration budget.
 
     python benchmarks/bench_tracking.py --frames 60
 
-Target (issue 4): <= 15 ms per 256 x 256 frame.
+Target (issue 20): <= 5 ms per 256 x 256 frame (``ms_per_frame_wall``).
 """
 
 from __future__ import annotations
@@ -62,7 +63,9 @@ def main(argv=None) -> int:
     images, masks = cine(args.frames)
     init = Ellipse(120, 128, 38, 36, 0)
     segment(images[0], init, args.method, max_iterations=5)  # compile the kernels (cached on disk)
+    t0 = time.perf_counter()
     result = track(images, init, args.method)
+    wall_ms = (time.perf_counter() - t0 - result.results[0].seconds) * 1000 / (args.frames - 1)
     per_frame_ms = np.array([r.seconds * 1000 for r in result.results[1:]])
     dsc = np.array([dice(m, t) for m, t in zip(result.masks, masks)])
 
@@ -78,6 +81,7 @@ def main(argv=None) -> int:
         "frames": args.frames,
         "size": list(images.shape[1:]),
         "method": args.method,
+        "ms_per_frame_wall": round(float(wall_ms), 2),
         "ms_per_frame_median": round(float(np.median(per_frame_ms)), 2),
         "ms_per_frame_mean": round(float(per_frame_ms.mean()), 2),
         "iterations_per_frame_mean": round(float(np.mean([r.iterations for r in result.results[1:]])), 1),
@@ -87,7 +91,7 @@ def main(argv=None) -> int:
         "peer_skimage_morph_cv": {"ms_per_frame_median": round(float(np.median(peer_ms)), 2),
                                   "dsc_mean": round(float(np.mean(peer_dsc)), 4)},
     }
-    out["speed_ratio_vs_peer"] = round(out["peer_skimage_morph_cv"]["ms_per_frame_median"] / out["ms_per_frame_median"], 2)
+    out["speed_ratio_vs_peer"] = round(out["peer_skimage_morph_cv"]["ms_per_frame_median"] / out["ms_per_frame_wall"], 2)
     print(json.dumps(out, indent=2))
     return 0
 

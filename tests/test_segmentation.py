@@ -263,3 +263,48 @@ def test_rsf_step_matches_li_et_al_formulas_term_by_term():
     step = np.abs(expected - phi).max()
     assert step > 1.0  # the fitting force moves φ: the comparison is not of two near-zero updates
     assert np.abs(out - expected).max() < 1e-9 * step, (np.abs(out - expected).max(), step)
+
+
+def test_edge_indicator_matches_numpy_gradients():
+    """The compiled g and ∇g against the definition written with NumPy's gradient."""
+    from scipy import ndimage
+
+    from hifumotion.segmentation._common import edge_indicator
+
+    img = ndimage.gaussian_filter(np.random.default_rng(2).random((37, 53)), 1.5)
+    gy, gx = np.gradient(img)
+    mag2 = gx**2 + gy**2
+    g = 1.0 / (1.0 + mag2 / np.percentile(mag2, 90.0))
+    g_y, g_x = np.gradient(g)
+    ours = edge_indicator(img, 1.0, smoothed=img)
+    for a, b in zip(ours, (g, g_x, g_y)):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    assert ours[0].min() < 0.6 < ours[0].max()  # g varies: the comparison is not of constants
+
+
+def test_target_model_weight_is_the_posterior_of_two_histograms():
+    """GLCV's balloon weight, against the posterior of 32-bin histograms made with np.histogram."""
+    import importlib
+
+    model_cls = importlib.import_module("hifumotion.segmentation.glcv").TargetModel
+    rng = np.random.default_rng(5)
+    inside = blob(shape=(80, 90), cx=45, cy=40, radius=20, harmonics=())
+    img = np.where(inside, 0.6, 0.3) + 0.1 * rng.standard_normal(inside.shape)
+    edges = np.linspace(img.min(), img.max() + 1e-9, 33)
+    p_in = np.histogram(img[inside], edges)[0] + 1.0
+    p_out = np.histogram(img[~inside], edges)[0] + 1.0
+    p_in, p_out = p_in / p_in.sum(), p_out / p_out.sum()
+    probe = np.array([0.3, 0.45, 0.6, img.min(), img.max(), img.max() + 1.0, img.min() - 1.0])
+    idx = np.clip(np.searchsorted(edges, probe, side="right") - 1, 0, 31)
+    expected = p_in[idx] / (p_in[idx] + p_out[idx])
+    np.testing.assert_allclose(model_cls.learn(img, inside).weight(probe), expected, rtol=1e-12)
+    assert expected[2] > 0.9 > 0.1 > expected[0]  # the target's intensity is typical of it, the rest's is not
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 1000])
+def test_percentile_is_numpys(n):
+    from hifumotion.segmentation._common import percentile
+
+    a = np.random.default_rng(n).random(n)
+    for q in (0.0, 37.5, 90.0, 100.0):
+        assert percentile(a, q) == pytest.approx(float(np.percentile(a, q)), rel=1e-12, abs=1e-15)

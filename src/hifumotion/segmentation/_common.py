@@ -77,12 +77,19 @@ def edge_indicator(image: np.ndarray, sigma_px: float, smoothed: np.ndarray | No
     ``smoothed`` passes ``G_σ * I`` when the caller already has it.
     """
     smooth = smoothed if smoothed is not None else gaussian(image, sigma_px)
-    gy, gx = np.gradient(smooth)
-    mag2 = gx * gx + gy * gy
-    lam2 = float(np.percentile(mag2, 90.0)) or 1e-12
-    g = 1.0 / (1.0 + mag2 / lam2)
-    g_y, g_x = np.gradient(g)
-    return g, g_x, g_y
+    mag2 = K.gradient_magnitude2(np.ascontiguousarray(smooth, dtype=np.float64))
+    lam2 = percentile(mag2, 90.0) or 1e-12
+    return K.edge_function(mag2, lam2)
+
+
+def percentile(a: np.ndarray, q: float) -> float:
+    """``np.percentile(a, q)`` (linear interpolation) from one partial sort, without its overhead."""
+    flat = np.ravel(a)
+    k = q / 100.0 * (flat.size - 1)
+    lo = int(k)
+    hi = min(lo + 1, flat.size - 1)
+    part = np.partition(flat, [lo, hi])
+    return float(part[lo] + (k - lo) * (part[hi] - part[lo]))
 
 
 @dataclass

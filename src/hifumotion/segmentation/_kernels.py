@@ -14,13 +14,21 @@ from numba import njit
 # --------------------------------------------------------------------------- interface geometry
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cross(a: float, b: float) -> float:
     """Fraction along an edge from a (value ``a``) to b where the linear interpolant crosses 0."""
     return a / (a - b)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _crossed(phi, i, j):
+    """Whether the zero level crosses the cell with top-left pixel (i, j): a cheap test that
+    spares most cells of a box the full marching-squares case analysis."""
+    a = phi[i, j] > 0
+    return a != (phi[i, j + 1] > 0) or a != (phi[i + 1, j + 1] > 0) or a != (phi[i + 1, j] > 0)
+
+
+@njit(cache=True, inline="always")
 def _cell_segments(phi, i, j, segs, pts):
     """Marching-squares segments of the cell with top-left pixel (i, j) into ``segs``; returns their count."""
     a = phi[i, j]          # top-left     (x=j,   y=i)
@@ -94,8 +102,8 @@ def interface_segments(phi, r0, r1, c0, c1):
     n = 0
     for i in range(max(r0, 0), r1):
         for j in range(max(c0, 0), c1):
-            k = _cell_segments(phi, i, j, segs, pts)
-            if k:
+            if _crossed(phi, i, j):
+                k = _cell_segments(phi, i, j, segs, pts)
                 out, n = _append(out, n, segs, k)
     return out[:n]
 
@@ -121,8 +129,8 @@ def interface_segments_near(phi, band, stamp, tag):
                 if i < 0 or j < 0 or i >= h - 1 or j >= w - 1 or stamp[i, j] == tag:
                     continue
                 stamp[i, j] = tag
-                k = _cell_segments(phi, i, j, segs, pts)
-                if k:
+                if _crossed(phi, i, j):
+                    k = _cell_segments(phi, i, j, segs, pts)
                     out, n = _append(out, n, segs, k)
     return out[:n]
 
@@ -578,3 +586,57 @@ def evolve_region(phi, image, point_image, hw, radius_px, static_prefix, count, 
                     snapshot[i, j] = phi[i, j] > 0
             snap_box = box
     return it, converged
+
+
+# --------------------------------------------------------------------------- the edge function
+
+
+@njit(cache=True, inline="always")
+def _gradient_at(a, i, j):
+    """``(∂a/∂row, ∂a/∂col)`` as ``np.gradient``: central differences, one-sided at the borders."""
+    h, w = a.shape
+    if h == 1:
+        gy = 0.0
+    elif i == 0:
+        gy = a[1, j] - a[0, j]
+    elif i == h - 1:
+        gy = a[h - 1, j] - a[h - 2, j]
+    else:
+        gy = 0.5 * (a[i + 1, j] - a[i - 1, j])
+    if w == 1:
+        gx = 0.0
+    elif j == 0:
+        gx = a[i, 1] - a[i, 0]
+    elif j == w - 1:
+        gx = a[i, w - 1] - a[i, w - 2]
+    else:
+        gx = 0.5 * (a[i, j + 1] - a[i, j - 1])
+    return gy, gx
+
+
+@njit(cache=True)
+def gradient_magnitude2(a):
+    """``|∇a|²`` with ``np.gradient``'s differences."""
+    h, w = a.shape
+    out = np.empty((h, w))
+    for i in range(h):
+        for j in range(w):
+            gy, gx = _gradient_at(a, i, j)
+            out[i, j] = gx * gx + gy * gy
+    return out
+
+
+@njit(cache=True)
+def edge_function(mag2, lam2):
+    """``g = 1 / (1 + |∇I_σ|² / λ²)`` and its gradient ``(g, ∂g/∂x, ∂g/∂y)`` (``np.gradient``'s differences)."""
+    h, w = mag2.shape
+    g = np.empty((h, w))
+    for i in range(h):
+        for j in range(w):
+            g[i, j] = 1.0 / (1.0 + mag2[i, j] / lam2)
+    gx = np.empty((h, w))
+    gy = np.empty((h, w))
+    for i in range(h):
+        for j in range(w):
+            gy[i, j], gx[i, j] = _gradient_at(g, i, j)
+    return g, gx, gy

@@ -50,7 +50,7 @@ from hifumotion.segmentation._common import (
     run_narrow_band,
 )
 from hifumotion.segmentation.levelset import initial_phi
-from hifumotion.segmentation.lcv import MU, region_force
+from hifumotion.segmentation.lcv import MU, force_scale, region_force
 
 #: σ of the edge function's Gaussian in the geodesic term, as a fraction of the initial
 #: equivalent radius: wide enough to see through speckle grains, which GAC's own σ is not.
@@ -72,7 +72,8 @@ class TargetModel:
     the rest of the image. Histograms of :data:`BINS` bins with one pseudo-count per bin.
     """
 
-    edges: np.ndarray
+    lo: float
+    step: float
     log_ratio: np.ndarray
 
     BINS = 32
@@ -80,20 +81,25 @@ class TargetModel:
     @classmethod
     def learn(cls, image: np.ndarray, inside: np.ndarray) -> "TargetModel":
         lo, hi = float(image.min()), float(image.max())
-        edges = np.linspace(lo, hi + 1e-9, cls.BINS + 1)
-        p_in = np.histogram(image[inside], edges)[0] + 1.0
-        p_out = np.histogram(image[~inside], edges)[0] + 1.0
-        return cls(edges, np.log(p_in / p_in.sum()) - np.log(p_out / p_out.sum()))
+        model = cls(lo, (hi + 1e-9 - lo) / cls.BINS, np.zeros(cls.BINS))
+        idx = model.bin_of(image)
+        p_in = np.bincount(idx[inside], minlength=cls.BINS) + 1.0
+        p_out = np.bincount(idx[~inside], minlength=cls.BINS) + 1.0
+        return cls(lo, model.step, np.log(p_in / p_in.sum()) - np.log(p_out / p_out.sum()))
+
+    def bin_of(self, image: np.ndarray) -> np.ndarray:
+        """The histogram bin of each intensity: :data:`BINS` equal bins from the learned image's
+        minimum to its maximum, values beyond them in the end bins."""
+        return np.clip(((image - self.lo) / self.step).astype(np.intp), 0, self.BINS - 1)
 
     def weight(self, image: np.ndarray) -> np.ndarray:
         """``P(target | I)`` for equal priors, in (0, 1), at every pixel of a smoothed image."""
-        idx = np.clip(np.searchsorted(self.edges, image, side="right") - 1, 0, self.BINS - 1)
-        return 1.0 / (1.0 + np.exp(-self.log_ratio[idx]))
+        return 1.0 / (1.0 + np.exp(-self.log_ratio[self.bin_of(image)]))
 
 
 def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, alpha: float = ALPHA,
          kappa1: float | None = None, sigma: float | None = None, balloon: str = "target", form: str = "smoothed",
-         carry: str = "global", multiscale: bool = True,
+         force_unit: float | None = None, carry: str = "global", multiscale: bool = True,
          max_iterations: int | None = None, spacing=None) -> SegmentationResult:
     """Segment with GLCV (Eq. 6–7).
 
@@ -122,6 +128,8 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
         pushing on until it meets an edge (see ``docs/decisions.md``).
     form
         How LCV's integral (Eq. 5) is evaluated, see :func:`~hifumotion.segmentation.lcv.region_force`.
+    force_unit
+        The region force's unit, as :func:`~hifumotion.segmentation.lcv.lcv`'s.
     carry
         ``"global"`` (default): the GAC's global solver carries the start to the boundary,
         then :data:`REFINE_ITERATIONS` of Eq. 7 refine it; ``"balloon"``: Eq. 7's flow from
@@ -137,6 +145,8 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
     if carry not in CARRIES:
         raise InputError(f"carry must be one of {CARRIES}, got {carry!r}", "carry")
     params: dict[str, Any] = {"mu": mu, "alpha": alpha, "balloon": balloon, "form": form, "carry": carry}
+    if force_unit is not None:
+        params["force_scale"] = float(force_unit)
     t0 = time.perf_counter()
     if carry == "global":
         from hifumotion.segmentation.gac import gac
@@ -153,6 +163,8 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
     def build(img, phi, factor):
         s = params.setdefault("sigma_px", sigma or max(1.0, SIGMA_FRACTION * equivalent_radius_px(phi) * factor))
         force = region_force(img, phi, factor, params, radius, form)
+        if kappa1 is None and "edge_contrast" not in params:  # a force unit was given, κ1 was not
+            params["edge_contrast"] = force_scale(force.stats, phi, img)[0]
         k1 = params.setdefault("kappa1", kappa1 if kappa1 is not None else params["edge_contrast"])
         smooth = gaussian(img, max(s / factor, 0.5))
         g, gx, gy = edge_indicator(img, max(s / factor, 0.5), smooth)

@@ -151,7 +151,8 @@ def region_force(img: np.ndarray, phi: np.ndarray, factor: int, params: dict, ra
 
 
 def lcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, form: str = "smoothed",
-        multiscale: bool = True, max_iterations: int | None = None, spacing=None) -> SegmentationResult:
+        force_unit: float | None = None, multiscale: bool = True, max_iterations: int | None = None,
+        spacing=None) -> SegmentationResult:
     """Segment with the localized Chan-Vese model (Eq. 1–5).
 
     Parameters
@@ -167,6 +168,10 @@ def lcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, f
     form
         How Eq. 5's integral is evaluated: ``"smoothed"``, ``"integral"`` or ``"point"``
         (see :func:`region_force`).
+    force_unit
+        The region force's unit (squared intensity); default from the initial contour
+        (:func:`force_scale`). Tracking passes the first frame's: a previous frame's
+        boundary is no inside start, and the contrast measured along it is the edge's.
     multiscale
         Run coarse to fine (a numerical acceleration; see ``docs/decisions.md``).
     max_iterations
@@ -175,6 +180,8 @@ def lcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, f
         Pixel size in mm (row, col), for the contour in mm.
     """
     params: dict[str, Any] = {"mu": mu, "form": form}
+    if force_unit is not None:
+        params["force_scale"] = float(force_unit)
 
     def build(img, phi, factor):
         force = region_force(img, phi, factor, params, radius, form)
