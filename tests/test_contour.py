@@ -78,3 +78,32 @@ def test_init_json_errors(tmp_path):
     bad.write_text(json.dumps({"a.png": {"points": [[1, 2]]}}))
     with pytest.raises(InputError, match=r"a.png.*at least 3"):
         load_initial_contours(bad)
+
+
+def test_mask_boundaries_are_scikit_images_iso_lines():
+    """The compiled marching squares give scikit-image's 0.5 iso-lines of the padded mask: the
+    same closed curves, point for point up to where each starts, in the same orientation,
+    holes and diagonal (saddle) contacts included."""
+    from scipy import ndimage
+    from skimage.measure import find_contours
+
+    from hifumotion.contour import _polygon_area, mask_boundaries_px
+
+    rows, cols = np.mgrid[0:60, 0:70]
+    r = np.hypot(cols - 30, rows - 28)
+    diagonal = np.zeros((60, 70), bool)
+    diagonal[10, 10] = diagonal[11, 11] = True
+    textured = [ndimage.gaussian_filter(np.random.default_rng(k).random((60, 70)), 2) > 0.5 for k in range(3)]
+    edge = np.zeros((60, 70), bool)
+    edge[:20, 50:] = True  # touches the image's border
+    for mask in [r < 15, (r < 20) & ~(r < 8), diagonal, edge, *textured]:
+        ours = mask_boundaries_px(mask)
+        theirs = [c[:-1, ::-1] - 1.0 for c in find_contours(np.pad(mask.astype(float), 1), 0.5)]
+        assert len(ours) == len(theirs) > 0
+        for c in theirs:
+            match = [o for o in ours if len(o) == len(c) and np.any(np.all(np.isclose(o, c[0]), axis=1))]
+            assert len(match) == 1
+            o = match[0]
+            k = int(np.flatnonzero(np.all(np.isclose(o, c[0]), axis=1))[0])
+            np.testing.assert_allclose(np.roll(o, -k, axis=0), c, atol=1e-12)
+            assert np.sign(_polygon_area(o)) == np.sign(_polygon_area(c))

@@ -37,3 +37,103 @@ def fill_polygon(xs, ys, h, w):
 
 
 __all__ = ["fill_polygon"]
+
+
+@njit(cache=True, inline="always")
+def _key(ky, kx, wide):
+    return ky * wide + kx
+
+
+@njit(cache=True)
+def boundary_curves(m):
+    """The 0.5 iso-lines of a 0/1 ``uint8`` array whose border rows and columns are 0.
+
+    Marching squares: each cell that the line crosses gives a segment between
+    midpoints of its edges; a saddle cell (two diagonal corners set) gives two,
+    cutting off each set corner (the set pixels meet only along edges, as
+    scikit-image's ``find_contours`` with ``fully_connected="low"``). Each
+    segment is oriented with the set corners on the same side, so the segments
+    chain into closed curves, each traced from its first cell in row-major order.
+    Returns ``(points, starts)``: ``(P, 2)`` float ``(x, y)`` pixel coordinates and
+    the ``C + 1`` offsets of the ``C`` curves in them.
+    """
+    h, w = m.shape
+    wide = 2 * w + 1
+    n = 0
+    for i in range(h - 1):
+        for j in range(w - 1):
+            code = m[i, j] + 2 * m[i, j + 1] + 4 * m[i + 1, j + 1] + 8 * m[i + 1, j]
+            if code == 5 or code == 10:
+                n += 2
+            elif code != 0 and code != 15:
+                n += 1
+    # doubled coordinates (2y, 2x) of each segment's ends: the edge midpoints of a cell
+    ends = np.empty((n, 4), np.int64)
+    q = 0
+    for i in range(h - 1):
+        for j in range(w - 1):
+            a, b, c, d = m[i, j], m[i, j + 1], m[i + 1, j + 1], m[i + 1, j]
+            code = a + 2 * b + 4 * c + 8 * d
+            if code == 0 or code == 15:
+                continue
+            top = (2 * i, 2 * j + 1)
+            right = (2 * i + 1, 2 * j + 2)
+            bottom = (2 * i + 2, 2 * j + 1)
+            left = (2 * i + 1, 2 * j)
+            if code == 5:  # a and c set, cut off separately
+                pairs = ((top, left, 2 * i, 2 * j), (bottom, right, 2 * i + 2, 2 * j + 2))
+            elif code == 10:  # b and d set
+                pairs = ((top, right, 2 * i, 2 * j + 2), (bottom, left, 2 * i + 2, 2 * j))
+            else:
+                # the two edges whose ends differ, and one set corner (doubled coordinates)
+                e = [(0, 0)] * 0
+                if a != b:
+                    e.append(top)
+                if b != c:
+                    e.append(right)
+                if c != d:
+                    e.append(bottom)
+                if d != a:
+                    e.append(left)
+                if a:
+                    cy, cx = 2 * i, 2 * j
+                elif b:
+                    cy, cx = 2 * i, 2 * j + 2
+                elif c:
+                    cy, cx = 2 * i + 2, 2 * j + 2
+                else:
+                    cy, cx = 2 * i + 2, 2 * j
+                pairs = ((e[0], e[1], cy, cx), (e[0], e[1], cy, cx))
+            for s in range(2 if (code == 5 or code == 10) else 1):
+                p, r, cy, cx = pairs[s]
+                # the set corner on the right of p → r, as scikit-image orients its curves
+                cross = (r[1] - p[1]) * (cy - p[0]) - (r[0] - p[0]) * (cx - p[1])
+                if cross < 0:
+                    p, r = r, p
+                ends[q, 0], ends[q, 1], ends[q, 2], ends[q, 3] = p[0], p[1], r[0], r[1]
+                q += 1
+    start_keys = np.empty(n, np.int64)
+    for s in range(n):
+        start_keys[s] = _key(ends[s, 0], ends[s, 1], wide)
+    order = np.argsort(start_keys)
+    sorted_keys = start_keys[order]
+    nxt = np.empty(n, np.int64)
+    for s in range(n):
+        k = np.searchsorted(sorted_keys, _key(ends[s, 2], ends[s, 3], wide))
+        nxt[s] = order[k]
+    points = np.empty((n, 2))
+    starts = [0]
+    seen = np.zeros(n, np.bool_)
+    p = 0
+    for s0 in range(n):
+        if seen[s0]:
+            continue
+        s = s0
+        while not seen[s]:
+            seen[s] = True
+            points[p, 0] = 0.5 * ends[s, 1]
+            points[p, 1] = 0.5 * ends[s, 0]
+            p += 1
+            s = nxt[s]
+        starts.append(p)
+    return points, np.array(starts, np.int64)

@@ -18,8 +18,8 @@ from typing import Any, Mapping
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from skimage.measure import find_contours
 
+from hifumotion._polygon import boundary_curves
 from hifumotion.errors import InputError
 from hifumotion.sequence import as_spacing_mm
 
@@ -76,17 +76,19 @@ def mask_boundaries_px(mask: np.ndarray) -> list[np.ndarray]:
     The curves are the 0.5 iso-lines of the mask (marching squares), so they
     pass half-way between foreground and background pixel centres; the mask is
     padded first, so a region touching the image border still gets a closed curve.
-    Holes give curves of their own.
+    Holes give curves of their own. The same curves, in the same orientation, as
+    scikit-image's ``find_contours(mask, 0.5)`` (tested), compiled
+    (:func:`hifumotion._polygon.boundary_curves`): it assembled its curves in Python.
     """
     m = np.asarray(mask, dtype=bool)
     rows, cols = np.flatnonzero(m.any(axis=1)), np.flatnonzero(m.any(axis=0))
     if rows.size == 0:
         return []
     # only the mask's bounding box holds curves: marching squares costs what that box costs
-    padded = np.pad(m[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1].astype(np.float32), 1)
-    curves = find_contours(padded, 0.5)
-    offset = np.array([cols[0] - 1.0, rows[0] - 1.0])
-    return [_drop_closing_point(c[:, ::-1] + offset) for c in curves if len(c) >= 3]
+    padded = np.pad(m[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1].astype(np.uint8), 1)
+    points, starts = boundary_curves(padded)
+    points += np.array([cols[0] - 1.0, rows[0] - 1.0])
+    return [points[a:b] for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()) if b - a >= 3]
 
 
 @dataclass
