@@ -118,3 +118,17 @@ def test_tracking_refines_locally_so_a_shrinking_target_is_followed():
     result = track(np.stack(frames), Ellipse(90, 90, 30, 30, 0), "glcv")
     # a globally carried contour could not have shrunk below its start, the previous frame
     assert result.results[-1].mask.sum() < result.results[0].mask.sum()
+
+
+def test_polar_sampling_is_scipys_bilinear_interpolation():
+    """The compiled sampler against SciPy's order-1 interpolation continued by the border values,
+    at points inside and beyond the image."""
+    from scipy import ndimage
+
+    from hifumotion.segmentation._minimal_path import _bilinear
+
+    rng = np.random.default_rng(0)
+    img = rng.random((40, 50))
+    rows, cols = rng.uniform(-5, 45, (30, 70)), rng.uniform(-5, 55, (30, 70))
+    expected = ndimage.map_coordinates(img, [rows, cols], order=1, mode="nearest")
+    np.testing.assert_allclose(_bilinear(img, rows, cols), expected, rtol=0, atol=1e-12)

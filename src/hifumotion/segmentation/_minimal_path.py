@@ -98,6 +98,25 @@ def closed_geodesic(g, rho_min, rho, dtheta, max_slope):
     return path, length
 
 
+@njit(cache=True)
+def _bilinear(image, rows, cols):
+    """``image`` bilinearly at fractional ``(rows, cols)``, continued by its border values beyond
+    its edges: ``scipy.ndimage.map_coordinates(image, [rows, cols], order=1, mode="nearest")``."""
+    h, w = image.shape
+    out = np.empty(rows.shape)
+    for a in range(rows.shape[0]):
+        for b in range(rows.shape[1]):
+            r = min(max(rows[a, b], 0.0), h - 1.0)
+            c = min(max(cols[a, b], 0.0), w - 1.0)
+            i, j = int(r), int(c)
+            i1, j1 = min(i + 1, h - 1), min(j + 1, w - 1)
+            fr, fc = r - i, c - j
+            top = image[i, j] + fc * (image[i, j1] - image[i, j])
+            bottom = image[i1, j] + fc * (image[i1, j1] - image[i1, j])
+            out[a, b] = top + fr * (bottom - top)
+    return out
+
+
 @dataclass(frozen=True)
 class PolarGrid:
     """Rays from ``centre_xy`` (px) at ``angles`` (rad), sampled at ``radii_px``."""
@@ -128,7 +147,7 @@ class PolarGrid:
         values beyond its edges), and whether the sample lies on the image."""
         rows, cols = self.coordinates()
         h, w = image.shape
-        values = ndimage.map_coordinates(image, [rows, cols], order=1, mode="nearest")
+        values = _bilinear(np.ascontiguousarray(image, dtype=np.float64), rows, cols)
         return values, (rows >= 0) & (rows <= h - 1) & (cols >= 0) & (cols <= w - 1)
 
     def points_xy(self, path: np.ndarray) -> np.ndarray:
