@@ -308,3 +308,33 @@ def test_percentile_is_numpys(n):
     a = np.random.default_rng(n).random(n)
     for q in (0.0, 37.5, 90.0, 100.0):
         assert percentile(a, q) == pytest.approx(float(np.percentile(a, q)), rel=1e-12, abs=1e-15)
+
+
+def test_a_process_pool_can_fork_after_every_model_ran():
+    """The benchmarks and the comparisons fork worker pools after segmenting in the parent; a
+    kernel on OpenMP threads makes that fork abort the workers ("fork() called from a process
+    already using GNU OpenMP"). Run in a fresh interpreter, so no other test's threads count."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent("""
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+        import numpy as np
+        from hifumotion.contour import Ellipse
+        from hifumotion.segmentation import METHODS, segment
+
+        def every_model():
+            rng = np.random.default_rng(0)
+            rows, cols = np.mgrid[0:64, 0:64]
+            img = np.where(np.hypot(cols - 32, rows - 32) < 18, 0.7, 0.3) + 0.03 * rng.standard_normal((64, 64))
+            return sum(int(segment(img, Ellipse(32, 32, 12, 12), m, max_iterations=5).mask.any()) for m in METHODS)
+
+        if __name__ == "__main__":
+            every_model()
+            with ProcessPoolExecutor(1, mp_context=mp.get_context("fork")) as pool:
+                print(pool.submit(every_model).result())
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "6", out.stderr[-2000:]

@@ -23,7 +23,7 @@ import time
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from hifumotion.segmentation._common import equivalent_radius_px, gaussian, make_result, prepare_image
 from hifumotion.segmentation.levelset import initial_phi
@@ -32,10 +32,10 @@ from hifumotion.segmentation.levelset import initial_phi
 SIGMA_FRACTION = 1.0 / 15.0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _heaviside_dirac(phi, img, epsilon, h, hi, dlt):
     """The regularised ``H_ε(φ)``, ``H_ε(φ) I`` and ``δ_ε(φ)`` of Li et al., in place."""
-    for i in prange(phi.shape[0]):
+    for i in range(phi.shape[0]):
         for j in range(phi.shape[1]):
             p = phi[i, j]
             h[i, j] = 0.5 * (1.0 + (2.0 / np.pi) * np.arctan(p / epsilon))
@@ -43,10 +43,10 @@ def _heaviside_dirac(phi, img, epsilon, h, hi, dlt):
             dlt[i, j] = (epsilon / np.pi) / (epsilon * epsilon + p * p)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _fitting_differences(kh, khi, k_img, k_one, lambda1, lambda2, a, b):
     """``a = λ1 f1 − λ2 f2`` and ``b = λ1 f1² − λ2 f2²`` from the smoothed H and H·I, in place."""
-    for i in prange(kh.shape[0]):
+    for i in range(kh.shape[0]):
         for j in range(kh.shape[1]):
             f1 = khi[i, j] / (kh[i, j] + 1e-10)
             f2 = (k_img[i, j] - khi[i, j]) / (k_one[i, j] - kh[i, j] + 1e-10)
@@ -65,11 +65,11 @@ def _central(a, i, j, di, dj, n):
     return 0.5 * (a[i + di, j + dj] - a[i - di, j - dj])
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _unit_normal(phi, nx, ny):
     """``∇φ/|∇φ|`` with ``np.gradient``'s differences, in place."""
     rows, cols = phi.shape
-    for i in prange(rows):
+    for i in range(rows):
         for j in range(cols):
             gy = _central(phi, i, j, 1, 0, rows)
             gx = _central(phi, i, j, 0, 1, cols)
@@ -78,7 +78,7 @@ def _unit_normal(phi, nx, ny):
             ny[i, j] = gy / norm
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _step(phi, img, img2k, ka, kb, dlt, nx, ny, nu, mu, time_step, out):
     """One explicit step of the RSF flow into ``out``.
 
@@ -88,7 +88,7 @@ def _step(phi, img, img2k, ka, kb, dlt, nx, ny, nu, mu, time_step, out):
     The curvature is ``div(∇φ/|∇φ|)`` and the Laplacian the five-point stencil
     with replicated borders."""
     rows, cols = phi.shape
-    for i in prange(rows):
+    for i in range(rows):
         for j in range(cols):
             kappa = _central(nx, i, j, 0, 1, cols) + _central(ny, i, j, 1, 0, rows)
             up = phi[max(i - 1, 0), j]
