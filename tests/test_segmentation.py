@@ -167,6 +167,13 @@ def test_nan_image_is_a_clear_error():
         segment(img, Ellipse(92, 78, 30, 26), "glcv")
 
 
+@pytest.mark.parametrize("method", ["lcv", "glcv"])
+@pytest.mark.parametrize("unit", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_force_unit_that_is_not_positive_is_a_clear_error(method, unit):
+    with pytest.raises(InputError, match="force_unit must be a positive number"):
+        segment(clean_image(blob()), Ellipse(92, 78, 30, 26), method, force_unit=unit)
+
+
 def test_unknown_method_is_a_clear_error():
     with pytest.raises(InputError, match="unknown method"):
         segment(np.zeros((50, 50)), Ellipse(25, 25, 10, 10), "snake")

@@ -50,7 +50,7 @@ from hifumotion.segmentation._common import (
     run_narrow_band,
 )
 from hifumotion.segmentation.levelset import initial_phi
-from hifumotion.segmentation.lcv import MU, force_scale, region_force
+from hifumotion.segmentation.lcv import MU, checked_force_unit, force_scale, region_force
 
 #: σ of the edge function's Gaussian in the geodesic term, as a fraction of the initial
 #: equivalent radius: wide enough to see through speckle grains, which GAC's own σ is not.
@@ -146,7 +146,7 @@ def glcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, 
         raise InputError(f"carry must be one of {CARRIES}, got {carry!r}", "carry")
     params: dict[str, Any] = {"mu": mu, "alpha": alpha, "balloon": balloon, "form": form, "carry": carry}
     if force_unit is not None:
-        params["force_scale"] = float(force_unit)
+        params["force_scale"] = checked_force_unit(force_unit)
     t0 = time.perf_counter()
     if carry == "global":
         from hifumotion.segmentation.gac import gac

@@ -36,6 +36,16 @@ MU = 1.0
 CONTRAST_FACTOR = 4.0
 
 
+def checked_force_unit(force_unit: float | None) -> float | None:
+    """``force_unit`` as a float, or :class:`InputError` unless it is a positive finite number."""
+    if force_unit is None:
+        return None
+    value = float(force_unit)
+    if not (np.isfinite(value) and value > 0):
+        raise InputError(f"force_unit must be a positive number (squared intensity), got {force_unit!r}", "force_unit")
+    return value
+
+
 def local_radius(radius_px: float) -> float:
     """Default r of Eq. 1: 0.3 × the initial contour's equivalent radius, within [6, 40] px."""
     return float(np.clip(RADIUS_FRACTION * radius_px, RADIUS_MIN_PX, RADIUS_MAX_PX))
@@ -181,7 +191,7 @@ def lcv(image: Any, init: Any, *, radius: float | None = None, mu: float = MU, f
     """
     params: dict[str, Any] = {"mu": mu, "form": form}
     if force_unit is not None:
-        params["force_scale"] = float(force_unit)
+        params["force_scale"] = checked_force_unit(force_unit)
 
     def build(img, phi, factor):
         force = region_force(img, phi, factor, params, radius, form)
