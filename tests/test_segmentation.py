@@ -168,7 +168,7 @@ def test_nan_image_is_a_clear_error():
 
 
 @pytest.mark.parametrize("method", ["lcv", "glcv"])
-@pytest.mark.parametrize("unit", [0.0, -1.0, float("nan"), float("inf")])
+@pytest.mark.parametrize("unit", [0.0, -1.0, float("nan"), float("inf"), "abc", [1.0]])
 def test_a_force_unit_that_is_not_positive_is_a_clear_error(method, unit):
     with pytest.raises(InputError, match="force_unit must be a positive number"):
         segment(clean_image(blob()), Ellipse(92, 78, 30, 26), method, force_unit=unit)

@@ -40,7 +40,10 @@ def checked_force_unit(force_unit: float | None) -> float | None:
     """``force_unit`` as a float, or :class:`InputError` unless it is a positive finite number."""
     if force_unit is None:
         return None
-    value = float(force_unit)
+    try:
+        value = float(force_unit)
+    except (TypeError, ValueError):
+        value = float("nan")
     if not (np.isfinite(value) and value > 0):
         raise InputError(f"force_unit must be a positive number (squared intensity), got {force_unit!r}", "force_unit")
     return value
