@@ -44,6 +44,14 @@ def _key(ky, kx, wide):
     return ky * wide + kx
 
 
+@njit(cache=True, inline="always")
+def _take(first, second, count, edge):
+    """The crossed edges of a cell so far, with ``edge`` added (a cell that is no saddle has two)."""
+    if count == 0:
+        return edge, second, 1
+    return first, edge, 2
+
+
 @njit(cache=True)
 def boundary_curves(m):
     """The 0.5 iso-lines of a 0/1 ``uint8`` array whose border rows and columns are 0.
@@ -86,15 +94,15 @@ def boundary_curves(m):
                 pairs = ((top, right, 2 * i, 2 * j + 2), (bottom, left, 2 * i + 2, 2 * j))
             else:
                 # the two edges whose ends differ, and one set corner (doubled coordinates)
-                e = [(0, 0)] * 0
+                e0, e1, k = top, top, 0
                 if a != b:
-                    e.append(top)
+                    e0, e1, k = _take(e0, e1, k, top)
                 if b != c:
-                    e.append(right)
+                    e0, e1, k = _take(e0, e1, k, right)
                 if c != d:
-                    e.append(bottom)
+                    e0, e1, k = _take(e0, e1, k, bottom)
                 if d != a:
-                    e.append(left)
+                    e0, e1, k = _take(e0, e1, k, left)
                 if a:
                     cy, cx = 2 * i, 2 * j
                 elif b:
@@ -103,7 +111,7 @@ def boundary_curves(m):
                     cy, cx = 2 * i + 2, 2 * j + 2
                 else:
                     cy, cx = 2 * i + 2, 2 * j
-                pairs = ((e[0], e[1], cy, cx), (e[0], e[1], cy, cx))
+                pairs = ((e0, e1, cy, cx), (e0, e1, cy, cx))
             for s in range(2 if (code == 5 or code == 10) else 1):
                 p, r, cy, cx = pairs[s]
                 # the set corner on the right of p → r, as scikit-image orients its curves
