@@ -592,7 +592,7 @@ def evolve_region(phi, image, point_image, hw, radius_px, static_prefix, count, 
 
 
 @njit(cache=True, inline="always")
-def _gradient_at(a, i, j):
+def gradient_at(a, i, j):
     """``(∂a/∂row, ∂a/∂col)`` as ``np.gradient``: central differences, one-sided at the borders."""
     h, w = a.shape
     if h == 1:
@@ -621,7 +621,7 @@ def gradient_magnitude2(a):
     out = np.empty((h, w))
     for i in range(h):
         for j in range(w):
-            gy, gx = _gradient_at(a, i, j)
+            gy, gx = gradient_at(a, i, j)
             out[i, j] = gx * gx + gy * gy
     return out
 
@@ -638,5 +638,5 @@ def edge_function(mag2, lam2):
     gy = np.empty((h, w))
     for i in range(h):
         for j in range(w):
-            gy[i, j], gx[i, j] = _gradient_at(g, i, j)
+            gy[i, j], gx[i, j] = gradient_at(g, i, j)
     return g, gx, gy

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from hifumotion.segmentation._common import equivalent_radius_px, gaussian, make_result, prepare_image
+from hifumotion.segmentation._kernels import gradient_at
 from hifumotion.segmentation.levelset import initial_phi
 
 #: σ of the kernel K_σ as a fraction of the initial equivalent radius (Li et al. use 3 px on small images).
@@ -54,25 +55,13 @@ def _fitting_differences(kh, khi, k_img, k_one, lambda1, lambda2, a, b):
             b[i, j] = lambda1 * f1 * f1 - lambda2 * f2 * f2
 
 
-@njit(cache=True, inline="always")
-def _central(a, i, j, di, dj, n):
-    """``np.gradient``'s difference along one axis: central inside, one-sided at the ends."""
-    k = i if di else j
-    if k == 0:
-        return a[i + di, j + dj] - a[i, j]
-    if k == n - 1:
-        return a[i, j] - a[i - di, j - dj]
-    return 0.5 * (a[i + di, j + dj] - a[i - di, j - dj])
-
-
 @njit(cache=True)
 def _unit_normal(phi, nx, ny):
     """``∇φ/|∇φ|`` with ``np.gradient``'s differences, in place."""
     rows, cols = phi.shape
     for i in range(rows):
         for j in range(cols):
-            gy = _central(phi, i, j, 1, 0, rows)
-            gx = _central(phi, i, j, 0, 1, cols)
+            gy, gx = gradient_at(phi, i, j)
             norm = np.sqrt(gx * gx + gy * gy) + 1e-10
             nx[i, j] = gx / norm
             ny[i, j] = gy / norm
@@ -90,7 +79,7 @@ def _step(phi, img, img2k, ka, kb, dlt, nx, ny, nu, mu, time_step, out):
     rows, cols = phi.shape
     for i in range(rows):
         for j in range(cols):
-            kappa = _central(nx, i, j, 0, 1, cols) + _central(ny, i, j, 1, 0, rows)
+            kappa = gradient_at(nx, i, j)[1] + gradient_at(ny, i, j)[0]
             up = phi[max(i - 1, 0), j]
             down = phi[min(i + 1, rows - 1), j]
             left = phi[i, max(j - 1, 0)]
