@@ -87,6 +87,30 @@ def test_predicted_section_follows_a_rigid_shift():
     assert np.allclose(centroid(pred, 0.2) - centroid(mask0, 0.2), shift[:2], atol=0.03)
 
 
+def test_predicted_section_of_a_uniform_strain_is_the_mapped_disc_at_every_stride():
+    """Particles strained uniformly (8 % compression in y, 4 % extension and a shear in x):
+    the predicted section is the frame-0 disc mapped by the same affine map, known in
+    closed form, whether the displacement is interpolated at every pixel or on the coarse
+    grid; the two differ by a few boundary pixels at most."""
+    from hifumotion.metrics import dice
+
+    mask0 = disc(PLANE.shape, 70, 60, 25)
+    ref = ReferenceShape(mask0, PLANE)
+    g = np.stack(np.meshgrid(np.arange(6, 23, 1.0), np.arange(4, 20, 1.0), np.arange(2, 9, 1.0),
+                             indexing="ij"), -1).reshape(-1, 3)
+    a = np.array([[1.04, 0.03, 0.0], [0.0, 0.92, 0.0], [0.0, 0.0, 1.0]])
+    centre = np.array([14.0, 12.0, 5.0])                       # the disc's centre (mm): col 70, row 60
+    moved = (g - centre) @ a.T + centre
+    rows, cols = np.mgrid[0:PLANE.shape[0], 0:PLANE.shape[1]]
+    xy = np.stack([cols * 0.2, rows * 0.2], -1) - centre[:2]   # mm from the centre
+    back = xy @ np.linalg.inv(a[:2, :2]).T                     # the material point of each pixel
+    expected = (back ** 2).sum(-1) <= (25 * 0.2) ** 2
+    fine = predicted_mask(moved, g, 1.0, ref, stride_px=1)
+    coarse = predicted_mask(moved, g, 1.0, ref)
+    assert dice(fine, expected) > 0.99 and dice(coarse, expected) > 0.99
+    assert (fine != coarse).sum() <= 10
+
+
 class AnalyticEvaluator(Evaluator):
     """An evaluator whose 'runs' are a known function of the parameters, in process (no Dask).
 
@@ -255,3 +279,31 @@ def test_the_displacement_objective_is_the_weighted_difference_of_the_points_mot
     assert np.allclose(disp[0], 0.0, atol=1e-6)
     assert disp[1, 0] == pytest.approx([0.2, 0.0], abs=1e-6)
     assert np.allclose(disp[1, 1:], 0.0, atol=1e-6)
+
+
+def test_contour_residuals_are_weighted_by_the_tracking_quality_at_each_point():
+    """A point's signed distance to the observed square is known by geometry (the mask's
+    0.5 iso-line lies half a pixel outside its outer pixels' centres). With the quality
+    weights it counts by the speckle's quality at the point: fully where the speckle
+    matches, a quarter where it matches a quarter, nothing where the image shows none."""
+    from hifumotion.speckle import DisplacementSeries
+
+    plane = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (40, 40), 0.5)
+    masks = np.zeros((3, 40, 40), bool)
+    masks[:, 10:30, 10:30] = True                            # edges at x, y = 4.75 and 14.75 mm
+    data = TrainingData.from_masks(masks, [1, 2], plane)
+    quality = np.ones((3, 40, 40), np.float32)
+    quality[:, :, 25:] = 0.0                                 # the right side (x ≥ 12.5 mm) unseen
+    quality[2, :18, :] = np.minimum(quality[2, :18, :], 0.25)   # frame 2's top rows (y < 9 mm) half-seen
+    series = DisplacementSeries(np.zeros((3, 40, 40, 2), np.float32), quality, (0.5, 0.5))
+    # 1.25 mm inside the left edge, 1.25 mm inside the top edge, 0.75 mm inside the right edge
+    rest = np.array([[6.0, 10.0, 5.0], [10.0, 6.0, 5.0], [14.0, 10.0, 5.0]])
+    points = np.stack([rest, rest, rest])
+    plain = residuals_mm(points, data)
+    assert plain == pytest.approx(np.tile([1.25, 1.25, 0.75], (2, 1)), abs=1e-9)
+    weighted = residuals_mm(points, data.with_contour_weights(series, rest))
+    assert weighted[0] == pytest.approx(plain[0] * [1.0, 1.0, 0.0], abs=1e-6)
+    assert weighted[1] == pytest.approx(plain[1] * [1.0, 0.25, 0.0], abs=1e-6)
+    unseen = DisplacementSeries(np.zeros((3, 40, 40, 2), np.float32), np.zeros((3, 40, 40), np.float32), (0.5, 0.5))
+    with pytest.raises(InputError, match="quality"):
+        data.with_contour_weights(unseen, rest)

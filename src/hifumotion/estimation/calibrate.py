@@ -64,6 +64,9 @@ class CalibrationSettings:
     # "contour": the distances of the model's points to the observed contours (the paper's S_t);
     # "contour+displacement": also the speckle-tracked displacement of those points
     objective: str = "contour"
+    # weight each contour residual by the speckle tracking's quality at the point (with speckle
+    # tracking; given or GLCV-tracked contours have no such measure and keep weight 1)
+    quality_weights: bool = False
 
 
 @dataclass
@@ -139,6 +142,8 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             raise InputError("the displacement objective needs speckle tracking (tracking = speckle)", "objective")
         # both models carry the same points A (frame 0's contour resampled), so one set serves both
         data = data.with_displacement(observation.motion.displacement, search.points_mm)
+    if s.quality_weights and observation.motion is not None and observation.contour_source == "speckle":
+        data = data.with_contour_weights(observation.motion.displacement, search.points_mm)
     timings["model_s"] = time.perf_counter() - t0
 
     asked = {"n": 0}

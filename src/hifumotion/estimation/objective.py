@@ -17,6 +17,14 @@ objective can then add, for each point a and training frame t, the in-plane diff
 ``(D̂_t(a) − D_t(a)) · q_t(a)`` (mm, both components), weighted by the tracking's quality
 ``q`` at a (0 where the point was occluded): the paper's S_t with the tangential part
 that a contour alone cannot give (:meth:`TrainingData.with_displacement`).
+
+The contour residuals themselves can be weighted by the same quality
+(:meth:`TrainingData.with_contour_weights`, the default with speckle tracking): a point
+whose speckle the image does not show — under the bar's blur, on the floor — was carried
+by a displacement filled in from its neighbours, and so was the observed boundary there.
+Measured on four twins, that boundary lagged the true one by half its motion under the
+bar, and the fitted model is least trustworthy there too (docs/decisions.md, "Weighting
+the contour by what the image shows").
 """
 
 from __future__ import annotations
@@ -57,6 +65,25 @@ class TrainingData:
     plane: Plane
     displacement_mm: np.ndarray | None = None     # (n, M, 2) observed in-plane D_t of the points A
     displacement_weight: np.ndarray | None = None  # (n, M) its quality (0: not observed)
+    contour_weight: np.ndarray | None = None       # (n, M) weight of each point's contour residual (None: 1)
+
+    def with_contour_weights(self, series, points_mm: np.ndarray) -> "TrainingData":
+        """These data with each contour residual weighted by the speckle tracking's quality
+        (clipped to [0, 1]) at the model's point A (``points_mm``, ``(M, 3)`` on the frame-0
+        contour, pool frame) in each training frame, read from a
+        :class:`~hifumotion.speckle.DisplacementSeries` on the imaging plane."""
+        from dataclasses import replace
+
+        px = self.plane.to_pixels(points_mm)
+        weight = []
+        for f in self.frames:
+            d, q = series.at(px, int(f))
+            weight.append(np.where(np.isfinite(d).all(1), np.clip(q, 0.0, 1.0), 0.0))
+        w = np.stack(weight)
+        if not (w > 0).any():
+            raise InputError("the speckle tracking sees none of the contour points in any training frame; "
+                             "calibrate without quality weights", "quality_weights")
+        return replace(self, contour_weight=w)
 
     def with_displacement(self, series, points_mm: np.ndarray) -> "TrainingData":
         """These data plus the observed displacement of the model's points A (``points_mm``,
@@ -107,6 +134,7 @@ def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = N
     ``points_mm`` is a run's ``(F, M, 3)`` point positions indexed by frame number;
     row i belongs to training frame ``data.frames[i]``; ``upto`` keeps the first
     ``upto`` training frames. Positive: the model's point lies inside the observed contour.
+    With ``data.contour_weight`` each point's distance is multiplied by its weight.
     """
     n = len(data.frames) if upto is None else int(upto)
     m = points_mm.shape[1]
@@ -119,6 +147,8 @@ def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = N
         xy = data.plane.to_pixels(points_mm[f])
         out[i, :m] = ndimage.map_coordinates(data.distance_px[i], [xy[:, 1], xy[:, 0]], order=1,
                                              mode="nearest") * data.pixel_mm
+        if data.contour_weight is not None:
+            out[i, :m] *= data.contour_weight[i]
         if data.displacement_mm is not None:
             model = (points_mm[f] - points_mm[0]) @ axes.T                     # (M, 2) in-plane, mm
             diff = (model - data.displacement_mm[i]) * data.displacement_weight[i][:, None]

@@ -23,14 +23,48 @@ from hifumotion.particles.section import displacement_at
 
 
 def predicted_mask(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float,
-                   reference: ReferenceShape) -> np.ndarray:
-    """The predicted target mask on the imaging plane's grid (module docstring)."""
+                   reference: ReferenceShape, stride_px: int | None = None) -> np.ndarray:
+    """The predicted target mask on the imaging plane's grid (module docstring).
+
+    The displacement is interpolated from the particles (Shepard, support 2 ``spacing_mm``)
+    on every ``stride_px``-th pixel and bilinearly in between; by default the stride is the
+    largest with at least two samples per particle spacing (a field that smooth is
+    bilinear to well under a pixel between them). ``stride_px=1`` interpolates at every pixel.
+    """
     plane = reference.plane
-    q = plane.points_mm().reshape(-1, 3)
-    u, covered = displacement_at(q, positions_mm, rest_mm, spacing_mm)
+    pixel = float(plane.pixel_mm)
+    if stride_px is None:
+        stride_px = max(1, int(spacing_mm / (2.0 * pixel)))
+    points = plane.points_mm()
+    if stride_px == 1:
+        q = points.reshape(-1, 3)
+        u, covered = displacement_at(q, positions_mm, rest_mm, spacing_mm)
+    else:
+        u, covered = _coarse_displacement(points, positions_mm, rest_mm, spacing_mm, int(stride_px))
+        q = points.reshape(-1, 3)
     mask = np.zeros(len(q), bool)
     mask[covered] = reference.inside(q[covered] - u[covered])
     return mask.reshape(plane.shape)
+
+
+def _coarse_displacement(points: np.ndarray, positions_mm, rest_mm, spacing_mm: float, stride: int):
+    """:func:`displacement_at` on every ``stride``-th pixel of ``points`` ``(H, W, 3)`` (and the last
+    row and column), bilinear in between; a pixel is covered where the bilinear coverage is ≥ ½."""
+    from scipy.ndimage import map_coordinates
+
+    h, w = points.shape[:2]
+    rows = np.unique(np.r_[np.arange(0, h, stride), h - 1])
+    cols = np.unique(np.r_[np.arange(0, w, stride), w - 1])
+    coarse = points[np.ix_(rows, cols)].reshape(-1, 3)
+    u, covered = displacement_at(coarse, positions_mm, rest_mm, spacing_mm)
+    grid = np.concatenate([u, covered[:, None].astype(float)], axis=1).reshape(len(rows), len(cols), 4)
+    # fractional coarse indices of every pixel (rows/cols are uniform but for the last one)
+    ri = np.interp(np.arange(h), rows, np.arange(len(rows)))
+    ci = np.interp(np.arange(w), cols, np.arange(len(cols)))
+    rr, cc = np.meshgrid(ri, ci, indexing="ij")
+    fine = np.stack([map_coordinates(grid[..., k], [rr, cc], order=1, mode="nearest") for k in range(4)], axis=-1)
+    fine = fine.reshape(-1, 4)
+    return fine[:, :3], fine[:, 3] >= 0.5
 
 
 @dataclass
