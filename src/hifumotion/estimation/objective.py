@@ -19,12 +19,10 @@ objective can then add, for each point a and training frame t, the in-plane diff
 that a contour alone cannot give (:meth:`TrainingData.with_displacement`).
 
 The contour residuals themselves can be weighted by the same quality
-(:meth:`TrainingData.with_contour_weights`, the default with speckle tracking): a point
-whose speckle the image does not show — under the bar's blur, on the floor — was carried
-by a displacement filled in from its neighbours, and so was the observed boundary there.
-Measured on four twins, that boundary lagged the true one by half its motion under the
-bar, and the fitted model is least trustworthy there too (docs/decisions.md, "Weighting
-the contour by what the image shows").
+(:meth:`TrainingData.with_contour_weights`, ``quality_weights``; off by default, measured
+mixed): a point whose speckle the image does not show — under the bar's blur, on the floor —
+was carried by a displacement filled in from its neighbours, and so was the observed
+boundary there (docs/decisions.md, "Issue 19, second part").
 """
 
 from __future__ import annotations
@@ -74,12 +72,7 @@ class TrainingData:
         :class:`~hifumotion.speckle.DisplacementSeries` on the imaging plane."""
         from dataclasses import replace
 
-        px = self.plane.to_pixels(points_mm)
-        weight = []
-        for f in self.frames:
-            d, q = series.at(px, int(f))
-            weight.append(np.where(np.isfinite(d).all(1), np.clip(q, 0.0, 1.0), 0.0))
-        w = np.stack(weight)
+        _, w = self._observed_at(series, points_mm)
         if not (w > 0).any():
             raise InputError("the speckle tracking sees none of the contour points in any training frame; "
                              "calibrate without quality weights", "quality_weights")
@@ -91,6 +84,12 @@ class TrainingData:
         :class:`~hifumotion.speckle.DisplacementSeries` on the imaging plane."""
         from dataclasses import replace
 
+        disp, weight = self._observed_at(series, points_mm)
+        return replace(self, displacement_mm=disp, displacement_weight=weight)
+
+    def _observed_at(self, series, points_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(n, M, 2)`` tracked displacement (mm, 0 where unknown) and ``(n, M)`` quality in
+        [0, 1] (0 where unknown) of the points at the training frames."""
         px = self.plane.to_pixels(points_mm)
         disp, weight = [], []
         for f in self.frames:
@@ -98,7 +97,7 @@ class TrainingData:
             ok = np.isfinite(d).all(1)
             disp.append(np.where(ok[:, None], d, 0.0))
             weight.append(np.where(ok, np.clip(q, 0.0, 1.0), 0.0))
-        return replace(self, displacement_mm=np.stack(disp), displacement_weight=np.stack(weight))
+        return np.stack(disp), np.stack(weight)
 
     def width(self, points: int) -> int:
         """Residuals per training frame for ``points`` points A: 1 each, 3 with displacements."""

@@ -36,12 +36,11 @@ def predicted_mask(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: fl
     if stride_px is None:
         stride_px = max(1, int(spacing_mm / (2.0 * pixel)))
     points = plane.points_mm()
+    q = points.reshape(-1, 3)
     if stride_px == 1:
-        q = points.reshape(-1, 3)
         u, covered = displacement_at(q, positions_mm, rest_mm, spacing_mm)
     else:
         u, covered = _coarse_displacement(points, positions_mm, rest_mm, spacing_mm, int(stride_px))
-        q = points.reshape(-1, 3)
     mask = np.zeros(len(q), bool)
     mask[covered] = reference.inside(q[covered] - u[covered])
     return mask.reshape(plane.shape)
