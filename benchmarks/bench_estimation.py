@@ -67,7 +67,7 @@ def _twin_settings(twin: Path) -> dict:
     return json.loads((twin / "truth" / "parameters.json").read_text()).get("config", {})
 
 
-def observe(twin: Path, training: str, tracking: str, offset_mm: float):
+def observe(twin: Path, training: str, tracking: str, offset_mm: float, fill_bar_cap: bool = True):
     """The observation of ``twin`` (timed) and the frames of the paper's protocol."""
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import default_frames
@@ -78,18 +78,20 @@ def observe(twin: Path, training: str, tracking: str, offset_mm: float):
     tmp = Path(tempfile.mkdtemp(prefix="bench_estimation_"))
     contours = _expert_contours(twin / "truth", [0] + train, tmp / "expert.csv") if training == "expert" else None
     t0 = time.perf_counter()
-    obs = prepare(observed, contours, boundary_offset_mm=0.0 if contours else offset_mm, tracking=tracking)
+    obs = prepare(observed, contours, boundary_offset_mm=0.0 if contours else offset_mm, tracking=tracking,
+                  fill_bar_cap=fill_bar_cap)
     return observed, obs, train, valid, time.perf_counter() - t0, tmp
 
 
-def calibrate_and_predict(observed, obs, train, valid, truth, params, method, workers, horizons, tmp) -> dict:
+def calibrate_and_predict(observed, obs, train, valid, truth, params, method, workers, horizons, tmp,
+                          settings: dict | None = None) -> dict:
     """One method on one observation: calibration, prediction, Table 4, online mode."""
     from hifumotion.estimation.calibrate import CalibrationSettings, calibrate, recovered_parameters
     from hifumotion.prediction.evaluate import evaluate, online_schedule
     from hifumotion.prediction.pipeline import online_predictions, predict_calibrated
 
     t0 = time.perf_counter()
-    cal = calibrate(obs, CalibrationSettings(method=method, training_frames=train, workers=workers),
+    cal = calibrate(obs, CalibrationSettings(method=method, training_frames=train, workers=workers, **(settings or {})),
                     log_path=tmp / f"log_{method}.jsonl")
     cal_s = time.perf_counter() - t0
     k = cal.parameters
@@ -153,6 +155,32 @@ def targets(protocol: str, r: dict) -> dict:
     return t
 
 
+def _settings(text: str) -> dict:
+    """``'a=true,b=3'`` → ``{'a': True, 'b': 3}`` for :class:`CalibrationSettings` fields."""
+    from dataclasses import fields
+
+    from hifumotion.estimation.calibrate import CalibrationSettings
+
+    known = {f.name for f in fields(CalibrationSettings)}
+    out: dict = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        key, sep, value = item.partition("=")
+        if not sep or key not in known:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with a field of CalibrationSettings")
+        low = value.lower()
+        out[key] = True if low == "true" else False if low == "false" else \
+            int(value) if value.lstrip("-").isdigit() else float(value) if _is_float(value) else value
+    return out
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def run_twin(twin: Path, args, offset_mm: float) -> dict:
     from hifumotion.scoring import read_frame_masks
 
@@ -160,13 +188,14 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
     truth = read_frame_masks(twin / "truth")
     motion = json.loads((twin / "truth" / "motion.json").read_text())
     protocol = _twin_settings(twin).get("protocol", {}).get("name", "custom")
-    observed, obs, train, valid, prep_s, tmp = observe(twin, args.training, args.tracking, offset_mm)
+    observed, obs, train, valid, prep_s, tmp = observe(twin, args.training, args.tracking, offset_mm,
+                                                       fill_bar_cap=not args.no_bar_cap)
     out = {"twin": str(twin), "protocol": protocol, "motion": motion, "boundary_offset_mm": offset_mm,
            "prepare_s": prep_s, "training_frames": train, "validation_frames": valid,
            "ncc_validation": ncc_validation(observed, obs, truth, valid), "methods": {}}
     for method in args.methods.split(","):
         r = calibrate_and_predict(observed, obs, train, valid, truth, params, method, args.workers,
-                                  [int(h) for h in args.horizons.split(",")], tmp)
+                                  [int(h) for h in args.horizons.split(",")], tmp, _settings(args.set))
         r["targets"] = targets(protocol, r)
         out["methods"][method] = r
         v = r["physics"]["validation"]
@@ -188,12 +217,20 @@ def main() -> None:
     ap.add_argument("--tracking", choices=["speckle", "glcv"], default="speckle")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--horizons", default="4,6,8", help="online horizons in frames")
+    ap.add_argument("--set", default="", help="CalibrationSettings fields to change, e.g. "
+                    "'quality_weights=true,bar_motion=false' (to measure an option against the defaults)")
+    ap.add_argument("--no-bar-cap", action="store_true", help="do not continue the sweep's top under the bar")
     args = ap.parse_args()
+    try:
+        _settings(args.set)
+    except ValueError as exc:
+        ap.error(str(exc))
 
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.experiment.config import ImagingConfig
 
-    out: dict = {"training": args.training, "tracking": args.tracking, "twins": {}}
+    out: dict = {"training": args.training, "tracking": args.tracking, "settings": _settings(args.set),
+                 "bar_cap": not args.no_bar_cap, "twins": {}}
     if args.twin is not None:
         folders = {args.twin.name: args.twin}
     else:

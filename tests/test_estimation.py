@@ -281,6 +281,30 @@ def test_the_displacement_objective_is_the_weighted_difference_of_the_points_mot
     assert np.allclose(disp[1, 1:], 0.0, atol=1e-6)
 
 
+def test_the_bar_residuals_are_the_in_plane_difference_of_the_bar_travels_times_root_m():
+    """The bar's residual is its model travel minus the tracked one, in the plane's axes,
+    weighted by √M: a bar moved 1.0 mm down (and 0.3 mm out of the plane, which the image
+    cannot see) against a tracked 0.6 mm down leaves 0.4 mm × √3 on the y column, 0 on x."""
+    plane = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (40, 40), 0.5)
+    masks = np.zeros((3, 40, 40), bool)
+    masks[:, 10:30, 10:30] = True
+    data = TrainingData.from_masks(masks, [1, 2], plane)
+    rest = np.array([[6.0, 10.0, 5.0], [10.0, 6.0, 5.0], [14.0, 10.0, 5.0]])
+    points = np.stack([rest, rest, rest])
+    shift = np.array([[0.0, 0.0], [0.0, -0.3], [0.0, -0.6]])          # tracked (x, y) mm per frame
+    bar = np.array([[5.0, 20.0, 5.0], [5.0, 19.5, 5.0], [5.0, 19.0, 5.3]])   # the model's bar centre
+    with_bar = data.with_bar(shift, len(rest))
+    r = residuals_mm(points, with_bar, bar_mm=bar)
+    assert r.shape == (2, 5) and with_bar.width(3) == 5
+    assert r[:, :3] == pytest.approx(residuals_mm(points, data), abs=1e-12)   # the contour part unchanged
+    assert r[0, 3:] == pytest.approx([0.0, -0.2 * np.sqrt(3)], abs=1e-12)
+    assert r[1, 3:] == pytest.approx([0.0, -0.4 * np.sqrt(3)], abs=1e-12)
+    with pytest.raises(InputError, match="bar"):
+        residuals_mm(points, with_bar)
+    with pytest.raises(InputError, match="bar"):
+        data.with_bar(shift[:2], len(rest))
+
+
 def test_contour_residuals_are_weighted_by_the_tracking_quality_at_each_point():
     """A point's signed distance to the observed square is known by geometry (the mask's
     0.5 iso-line lies half a pixel outside its outer pixels' centres). With the quality

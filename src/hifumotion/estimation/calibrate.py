@@ -66,7 +66,10 @@ class CalibrationSettings:
     objective: str = "contour"
     # weight each contour residual by the speckle tracking's quality at the point (with speckle
     # tracking; given or GLCV-tracked contours have no such measure and keep weight 1)
-    quality_weights: bool = False
+    quality_weights: bool = True
+    # also fit the bar's tracked displacement (objective.TrainingData.with_bar), where the
+    # speckle tracking followed a bar
+    bar_motion: bool = True
 
 
 @dataclass
@@ -143,7 +146,13 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         # both models carry the same points A (frame 0's contour resampled), so one set serves both
         data = data.with_displacement(observation.motion.displacement, search.points_mm)
     if s.quality_weights and observation.motion is not None and observation.contour_source == "speckle":
-        data = data.with_contour_weights(observation.motion.displacement, search.points_mm)
+        try:
+            data = data.with_contour_weights(observation.motion.displacement, search.points_mm)
+        except InputError:
+            pass    # the speckle shows none of the points: every point keeps weight 1, as without weights
+    shift = None if observation.motion is None else observation.motion.displacement.rigid_shift_mm
+    if s.bar_motion and shift is not None and observation.observed.setup.bar.enabled:
+        data = data.with_bar(shift, len(search.points_mm))
     timings["model_s"] = time.perf_counter() - t0
 
     asked = {"n": 0}

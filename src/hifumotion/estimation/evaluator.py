@@ -48,7 +48,7 @@ def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: 
         set_threads(int(threads))
     n = len(data.frames) if upto is None else int(upto)
     run = run_model(spec, k, int(data.frames[n - 1]))
-    r = residuals_mm(run.points_mm, data, n)
+    r = residuals_mm(run.points_mm, data, n, run.bar_centre_mm)
     return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps}
 
 

@@ -19,10 +19,19 @@ objective can then add, for each point a and training frame t, the in-plane diff
 that a contour alone cannot give (:meth:`TrainingData.with_displacement`).
 
 The contour residuals themselves can be weighted by the same quality
-(:meth:`TrainingData.with_contour_weights`, ``quality_weights``; off by default, measured
-mixed): a point whose speckle the image does not show — under the bar's blur, on the floor —
+(:meth:`TrainingData.with_contour_weights`, ``quality_weights``; on by default since the
+top under the bar is continued and the bar's travel fitted, docs/decisions.md, "Issue 19,
+third part"): a point whose speckle the image does not show — under the bar's blur, on the floor —
 was carried by a displacement filled in from its neighbours, and so was the observed
 boundary there (docs/decisions.md, "Issue 19, second part").
+
+The bar is observed too: its echo is a large rigid body the speckle tracker follows to a few
+per cent (:attr:`~hifumotion.speckle.DisplacementSeries.rigid_shift_mm`), and under a
+force-controlled push its travel is what F/E sets most directly. With
+:meth:`TrainingData.with_bar` the objective adds, per training frame, the in-plane difference
+(mm, x and y) of the model's bar displacement and the tracked one, weighted by √M (M points A):
+the bar's shift is estimated from its whole echo, so it counts as much as the whole contour
+(docs/decisions.md, "Issue 19, third part").
 """
 
 from __future__ import annotations
@@ -64,6 +73,21 @@ class TrainingData:
     displacement_mm: np.ndarray | None = None     # (n, M, 2) observed in-plane D_t of the points A
     displacement_weight: np.ndarray | None = None  # (n, M) its quality (0: not observed)
     contour_weight: np.ndarray | None = None       # (n, M) weight of each point's contour residual (None: 1)
+    bar_shift_mm: np.ndarray | None = None         # (n, 2) tracked in-plane displacement of the bar (mm)
+    bar_weight: float = 0.0                        # weight of its residuals (√M, :meth:`with_bar`)
+
+    def with_bar(self, rigid_shift_mm: np.ndarray, points: int) -> "TrainingData":
+        """These data plus the bar's tracked displacement (``(T, 2)`` x, y in mm from frame 0,
+        every frame) at the training frames, weighted by √``points`` (module docstring)."""
+        from dataclasses import replace
+
+        shift = np.asarray(rigid_shift_mm, float)
+        if shift.ndim != 2 or shift.shape[1] != 2 or len(shift) <= self.last_frame:
+            raise InputError(f"expected the bar's shift for every frame up to {self.last_frame}, (T, 2) mm; "
+                             f"got shape {shift.shape}", "bar_shift_mm")
+        if not np.isfinite(shift[self.frames]).all():
+            raise InputError("the bar's tracked shift is not finite at every training frame", "bar_shift_mm")
+        return replace(self, bar_shift_mm=shift[self.frames], bar_weight=float(np.sqrt(points)))
 
     def with_contour_weights(self, series, points_mm: np.ndarray) -> "TrainingData":
         """These data with each contour residual weighted by the speckle tracking's quality
@@ -100,8 +124,9 @@ class TrainingData:
         return np.stack(disp), np.stack(weight)
 
     def width(self, points: int) -> int:
-        """Residuals per training frame for ``points`` points A: 1 each, 3 with displacements."""
-        return points * (3 if self.displacement_mm is not None else 1)
+        """Residuals per training frame for ``points`` points A: 1 each, 3 with displacements;
+        2 more with the bar."""
+        return points * (3 if self.displacement_mm is not None else 1) + (2 if self.bar_shift_mm is not None else 0)
 
     @classmethod
     def from_masks(cls, masks: np.ndarray, frames, plane: Plane) -> "TrainingData":
@@ -125,10 +150,13 @@ class TrainingData:
         return float(self.plane.pixel_mm)
 
 
-def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = None) -> np.ndarray:
+def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = None,
+                 bar_mm: np.ndarray | None = None) -> np.ndarray:
     """``(n, M)`` signed distances (mm) of the model's points to the observed contours; with
     observed displacements, ``(n, 3M)``: those, then the weighted in-plane displacement
-    differences (mm) of each point, x and y in turn.
+    differences (mm) of each point, x and y in turn; with the bar's (``data.bar_shift_mm``),
+    two more columns: the weighted in-plane difference (mm) of the model's bar displacement
+    (``bar_mm``, the run's ``(F, 3)`` bar centre) and the tracked one.
 
     ``points_mm`` is a run's ``(F, M, 3)`` point positions indexed by frame number;
     row i belongs to training frame ``data.frames[i]``; ``upto`` keeps the first
@@ -137,6 +165,8 @@ def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = N
     """
     n = len(data.frames) if upto is None else int(upto)
     m = points_mm.shape[1]
+    if data.bar_shift_mm is not None and bar_mm is None:
+        raise InputError("the objective compares the bar's motion but the run gave no bar positions", "bar_mm")
     out = np.empty((n, data.width(m)))
     axes = np.stack([np.asarray(data.plane.u, float), np.asarray(data.plane.v, float)])   # (2, 3)
     for i in range(n):
@@ -151,7 +181,10 @@ def residuals_mm(points_mm: np.ndarray, data: TrainingData, upto: int | None = N
         if data.displacement_mm is not None:
             model = (points_mm[f] - points_mm[0]) @ axes.T                     # (M, 2) in-plane, mm
             diff = (model - data.displacement_mm[i]) * data.displacement_weight[i][:, None]
-            out[i, m:] = diff.ravel()
+            out[i, m:3 * m] = diff.ravel()
+        if data.bar_shift_mm is not None:
+            moved = (np.asarray(bar_mm[f], float) - np.asarray(bar_mm[0], float)) @ axes.T
+            out[i, -2:] = (moved - data.bar_shift_mm[i]) * data.bar_weight
     return out
 
 

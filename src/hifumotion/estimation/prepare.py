@@ -61,6 +61,9 @@ class Observation:
         field, the carried contour points and their quality); ``None`` with GLCV tracking.
     timings_s
         Wall time of each step (s).
+    bar_cap
+        What the continuation of the top under the resting bar did
+        (:class:`~hifumotion.observed.bar_cap.BarCap`); ``None`` when it was not asked for.
     """
 
     observed: Observed
@@ -71,6 +74,7 @@ class Observation:
     contour_source: str
     timings_s: dict = field(default_factory=dict)
     motion: object | None = None
+    bar_cap: object | None = None
 
     @property
     def pixel_mm(self) -> float:
@@ -89,8 +93,24 @@ class Observation:
         from hifumotion.estimation.reference import ReferenceShape
 
         rec = self.reconstruction
-        return ReferenceShape(self.frame_masks[0], self.frame_plane, rec.distance_mm, rec.voxel_mm,
+        return ReferenceShape(self.frame0_mask(), self.frame_plane, rec.distance_mm, rec.voxel_mm,
                               tuple(float(v) for v in np.asarray(rec.origin_mm) + self.offset_mm))
+
+    def frame0_mask(self) -> np.ndarray:
+        """The frame-0 target the predictions carry: the observed one, with its top under the
+        resting bar continued up to the reconstruction's where the sweep's top was continued
+        (:func:`~hifumotion.observed.bar_cap.fill_section_under_bar`): the observed contour
+        stops at the bar's bloom, the tissue does not."""
+        mask = self.frame_masks[0]
+        cap = self.bar_cap
+        if cap is None or cap.skipped or not cap.filled_voxels:
+            return mask
+        from hifumotion.observed.bar_cap import fill_section_under_bar
+
+        b = self.observed.setup.bar
+        pts = self.frame_plane.points_mm()
+        inside = self.inside_tank(pts.reshape(-1, 3)).reshape(mask.shape)
+        return fill_section_under_bar(mask, pts, inside, b.tip_at_rest_mm, b.direction, b.radius_mm, BAR_MARGIN_MM)
 
     def inside_tank(self, points_mm: np.ndarray) -> np.ndarray:
         """Signed distance (mm, positive inside) of tank points to the reconstructed resting tissue."""
@@ -136,9 +156,22 @@ def known_solid_mask(setup, z_mm: float) -> np.ndarray:
     return known_solids(imaging_plane(setup, z_mm), setup, BAR_MARGIN_MM).any
 
 
+def _fill_bar_cap(masks: np.ndarray, observed: Observed, boundary_offset_mm: float):
+    """The sweep's masks with the top the bar's exclusion cut continued under it."""
+    from hifumotion.observed.bar_cap import fill_under_bar
+    from hifumotion.observed.solids import imaging_plane
+
+    z = np.asarray(observed.sweep_z_mm, float)
+    points = np.stack([imaging_plane(observed.setup, zk).points_mm() for zk in z])
+    gap = float(np.median(np.abs(np.diff(np.sort(z))))) if len(z) > 1 else observed.pixel_mm
+    b = observed.setup.bar
+    return fill_under_bar(masks, points, b.tip_at_rest_mm, b.direction, b.radius_mm, BAR_MARGIN_MM,
+                          (observed.pixel_mm, gap), boundary_offset_mm)
+
+
 def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
             progress: Progress | None = None, boundary_offset_mm: float = 0.0,
-            tracking: str = "speckle") -> Observation:
+            tracking: str = "speckle", fill_bar_cap: bool = True) -> Observation:
     """Segment, reconstruct and track an observed experiment (module docstring).
 
     ``boundary_offset_mm``: how far outside the true boundary the imaging system's
@@ -146,6 +179,10 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     (for instance :func:`~hifumotion.experiment.boundary_offset.measure_boundary_offset` on a
     simulated one); the sweep's and
     the tracked frames' masks are moved inwards by it (the user's own contours are not).
+
+    ``fill_bar_cap``: continue the sweep's top into the band around the resting bar that its
+    segmentation had to leave out (:func:`~hifumotion.observed.bar_cap.fill_under_bar`), so the
+    reconstructed tissue touches the bar as the real one does.
     """
     from hifumotion.observed import shift_boundary
     from hifumotion.segmentation import track
@@ -162,6 +199,12 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     start = int(np.argmin(np.abs(observed.sweep_z_mm - z_frames)))
     exclude = np.stack([known_solid_mask(observed.setup, z) for z in observed.sweep_z_mm])
     sweep = segment_sweep(observed.sweep, init, start, method, spacing=px, exclude=exclude)
+    cap = None
+    if fill_bar_cap and observed.setup.bar.enabled:
+        sweep.masks, cap = _fill_bar_cap(sweep.masks, observed, boundary_offset_mm)
+        sweep.notes.append(f"under the resting bar: {cap.skipped}" if cap.skipped else
+                           f"under the resting bar: {cap.filled_voxels} pixels of the top continued "
+                           f"from {cap.fitted_columns} seen columns into {cap.cut_columns} cut ones")
     tell("segment sweep", 1.0)
     timings["segment_sweep_s"] = time.perf_counter() - t0
 
@@ -200,7 +243,7 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     source = str(contours_csv) if given else tracking
     tell("track frames", 1.0)
     timings["track_s"] = time.perf_counter() - t2
-    return Observation(observed, sweep, rec, offset, masks, source, timings, motion)
+    return Observation(observed, sweep, rec, offset, masks, source, timings, motion, cap)
 
 
 __all__ = ["Observation", "frame_solids", "known_solid_mask", "prepare", "read_user_contours"]

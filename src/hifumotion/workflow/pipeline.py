@@ -52,7 +52,9 @@ class EstimationConfig(ConfigModel):
     objective: Literal["contour", "contour+displacement"] = Field(
         "contour", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points")
     quality_weights: bool = Field(
-        False, description="weight each contour point's residual by the speckle tracking's quality there (speckle tracking only): a boundary the image does not show (under the bar's blur, on the floor) counts for little")
+        True, description="weight each contour point's residual by the speckle tracking's quality there (speckle tracking only): a boundary the image does not show (under the bar's blur, on the floor) counts for little")
+    bar_motion: bool = Field(
+        True, description="also fit the bar's tracked displacement (speckle tracking with a bar in setup.json): under a force-controlled push the bar's travel is what F/E sets most directly")
     tracking: Literal["speckle", "glcv"] = Field(
         "speckle", description="how the time series is observed: frame 0's contour carried by speckle tracking, or GLCV re-segmenting every frame (the paper)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
@@ -113,7 +115,7 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
         cal = calibrate(observation, CalibrationSettings(
             method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
             model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations, objective=s.objective,
-            quality_weights=s.quality_weights,
+            quality_weights=s.quality_weights, bar_motion=s.bar_motion,
             workers=s.workers, scheduler_address=s.scheduler_address), log_path=log, progress=tell)
     with stage("write the calibration"):
         cal.summary = save_calibration(cal, folder, observed_dir)
