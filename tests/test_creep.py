@@ -73,6 +73,32 @@ def test_creep_under_a_held_load_follows_the_kelvin_voigt_law():
     assert np.abs(r.advance_mm - expected).max() <= 0.02 * final
 
 
+def test_a_released_bar_rests_on_the_block_as_it_creeps_back_by_the_kelvin_voigt_law():
+    # held, then let go: ε(t) = ε₁ exp(−(t − t₁)/τ) after t₁ (ν = 0: the weight's own strain is
+    # settled at frame 0 and adds nothing to the change); the unloaded bar follows the top,
+    # touching and taking no force (as the FE reference's bar does)
+    n, e, mu, force = 3, 5e3, 2e3, 0.01
+    tau = 2 * mu / e
+    t1 = 4 * tau
+    mesh = voxel_mesh(block(n), 1.0)
+    punch = Punch((n / 2 * MM, n * MM, n / 2 * MM), (0.0, -1.0, 0.0), 10 * n * MM,
+                  lambda t: force if 0 < t <= t1 else 0.0, 0.0, (t1,))
+    # its weight (a hundredth of the push) keeps the block on the floor as it springs back
+    solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=mu, beta2=0.0, density_kg_m3=1000.0, rate_floor_per_s=1e-12),
+                         Surroundings((0.0, -9.81, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch,
+                         CreepSettings(tolerance=0.001))
+    times = t1 + np.array([0.0, 0.5, 1.0, 2.0, 3.0]) * tau
+    r = solver.run(np.r_[0.0, times])
+    final = force / (n * MM) ** 2 / e * n
+    held = final * (1 - np.exp(-t1 / tau))
+    expected = held * np.exp(-(times - t1) / tau)
+    assert np.abs(r.advance_mm[1:] - expected).max() <= 0.02 * held
+    top = mesh.nodes_mm[:, 1] > n - 1e-9
+    sink = -(r.nodes_mm[:, top, 1] - r.nodes_mm[0, top, 1]).mean(axis=1)   # since the settled frame 0
+    np.testing.assert_allclose(sink[2:], r.advance_mm[2:], atol=1e-6 * n)   # touching, not lifted off
+    assert np.all(r.bar_force_n[2:] == 0.0) and r.stats["max_penetration_mm"] <= 0.01
+
+
 def test_the_bar_takes_its_force_and_nothing_crosses_a_surface():
     from hifumotion.creep.scene import simulate_creep
     from hifumotion.particles.scene import Scene

@@ -16,7 +16,7 @@ from hifumotion.estimation.model import Parameters
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
 from hifumotion.estimation.protocol import default_frames, parse_frames
 from hifumotion.estimation.space import SearchSpace
-from hifumotion.particles.section import Plane, displacement_at
+from hifumotion.particles.section import Plane, displacement_at, plane_displacement
 from hifumotion.prediction.physics import ReferenceShape, predicted_mask
 
 PLANE = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (120, 140), 0.2)
@@ -87,11 +87,37 @@ def test_predicted_section_follows_a_rigid_shift():
     assert np.allclose(centroid(pred, 0.2) - centroid(mask0, 0.2), shift[:2], atol=0.03)
 
 
+def test_predicted_mask_is_the_interpolation_at_every_pixel_under_a_large_motion():
+    """predicted_mask splats the particles' displacement onto the pixels: it must be the Shepard
+    interpolation a tree search gives at every pixel, and so the mask, for a motion of 2 mm with
+    a turn and an out-of-plane part and a reference continued out of the plane by a sphere."""
+    mask0 = disc(PLANE.shape, 70, 60, 25)
+    zz, yy, xx = np.mgrid[0:12, 0:26, 0:30] * 1.0               # 1 mm voxels from the tank origin
+    sphere = 5.0 - np.sqrt((xx - 14.0) ** 2 + (yy - 12.0) ** 2 + (zz - 5.0) ** 2)
+    ref = ReferenceShape(mask0, PLANE, sphere, 1.0, (0.0, 0.0, 0.0))
+    g = np.stack(np.meshgrid(np.arange(6, 23, 1.0), np.arange(4, 20, 1.0), np.arange(1, 10, 1.0),
+                             indexing="ij"), -1).reshape(-1, 3)
+    turn = np.deg2rad(12.0)
+    rot = np.array([[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0.0, 0.0, 1.0]])
+    centre = np.array([14.0, 12.0, 5.0])
+    moved = (g - centre) @ rot.T + centre + np.array([1.5, -1.0, 0.8]) + 0.3 * np.sin(g / 3.0)
+    pts = PLANE.points_mm().reshape(-1, 3)
+    u, covered = displacement_at(pts, moved, g, 1.0, neighbours=64)    # a tree search per pixel
+    splat, splat_covered = plane_displacement(moved, g, 1.0, PLANE)     # each particle splatted
+    assert np.array_equal(splat_covered.ravel(), covered)
+    np.testing.assert_allclose(splat.reshape(-1, 3), u, atol=1e-9)
+    everywhere = np.zeros(len(pts), bool)
+    everywhere[covered] = ref.inside(pts[covered] - u[covered])
+    pred = predicted_mask(moved, g, 1.0, ref, stride_px=1)
+    assert everywhere.sum() > 1000
+    assert np.array_equal(pred, everywhere.reshape(PLANE.shape))
+
+
 def test_predicted_section_of_a_uniform_strain_is_the_mapped_disc_at_every_stride():
     """Particles strained uniformly (8 % compression in y, 4 % extension and a shear in x):
     the predicted section is the frame-0 disc mapped by the same affine map, known in
-    closed form, whether the displacement is interpolated at every pixel or on the coarse
-    grid; the two differ by a few boundary pixels at most."""
+    closed form, whether the displacement is interpolated at every pixel (the default) or on
+    the coarse grid; the two differ by a few boundary pixels at most."""
     from hifumotion.metrics import dice
 
     mask0 = disc(PLANE.shape, 70, 60, 25)
@@ -106,7 +132,7 @@ def test_predicted_section_of_a_uniform_strain_is_the_mapped_disc_at_every_strid
     back = xy @ np.linalg.inv(a[:2, :2]).T                     # the material point of each pixel
     expected = (back ** 2).sum(-1) <= (25 * 0.2) ** 2
     fine = predicted_mask(moved, g, 1.0, ref, stride_px=1)
-    coarse = predicted_mask(moved, g, 1.0, ref)
+    coarse = predicted_mask(moved, g, 1.0, ref, stride_px=2)
     assert dice(fine, expected) > 0.99 and dice(coarse, expected) > 0.99
     assert (fine != coarse).sum() <= 10
 
@@ -331,3 +357,4 @@ def test_contour_residuals_are_weighted_by_the_tracking_quality_at_each_point():
     unseen = DisplacementSeries(np.zeros((3, 40, 40, 2), np.float32), np.zeros((3, 40, 40), np.float32), (0.5, 0.5))
     with pytest.raises(InputError, match="quality"):
         data.with_contour_weights(unseen, rest)
+

@@ -322,10 +322,28 @@ class CreepSolver:
         first = under[gap[under] <= reach + self.settings.contact_tolerance * self.dx_m]
         cs.touch(first, np.full(len(first), cs.punch_index), u)
 
+    def _follow(self, u: np.ndarray) -> None:
+        """An unloaded bar's face onto the nearest tissue under it (its advance, m); kept if none is."""
+        cs = self.contacts
+        a = cs.body_frames[cs.punch_index, 0]
+        rel = self.rest_m + u - np.asarray(self.punch.tip_m)
+        along = rel @ a
+        across = np.linalg.norm(rel - along[:, None] * a, axis=1)
+        under = across <= self.punch.radius_m
+        if under.any():
+            self.advance_m = float(along[under].min())
+
     def step(self, u: np.ndarray, v: np.ndarray, t_new: float, dt: float, mu: np.ndarray | None,
              key) -> tuple[np.ndarray, float]:
         """Displacement (m, (n, 3)) at ``t_new`` after a step ``dt`` from (u, v); the bar's force taken."""
         force = float(self.punch.force_n(t_new)) if self.punch is not None else 0.0
+        unloaded = self.punch is not None and force <= 0.0
+        if unloaded:
+            # a bar with no push holds nothing: it rests on the tissue and follows it
+            # (as the twin's truth, reference.creep_fe.follow); held with zero force it would
+            # leave its advance to contacts whose reactions must sum to nothing (chatter)
+            self.contacts.release(np.flatnonzero(self.contacts.body == self.contacts.punch_index))
+            self._follow(u)
         a, c = self._matrices(dt, mu)
         base = self.body_force.ravel() + np.repeat(self.mass, 3) / dt ** 2 * (u + dt * v).ravel()
         if c is not None:
@@ -345,6 +363,8 @@ class CreepSolver:
             new, s = self._solve(a, rhs, force, key, guess)
             if s is not None:
                 self.advance_m = float(s)
+            if unloaded:
+                self._follow(new.reshape(-1, 3))
             reaction = (a @ new - rhs).reshape(-1, 3)
             unew = new.reshape(-1, 3)
             old_pressure = cs.pressure[slip].copy()
