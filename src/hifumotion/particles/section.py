@@ -53,8 +53,10 @@ class Plane:
 
 
 @njit(cache=True, parallel=True)
-def _colour(pix_u, pix_v, normal_d, volume, h, rows, cols, pixel, out):
+def _splat(pix_u, pix_v, normal_d, values, h, rows, cols, pixel, out):
+    """``out[r, c, k] += Σ_i W(|q_rc − x_i|, h) values[i, k]`` over the particles near the plane."""
     n = pix_u.shape[0]
+    m = values.shape[1]
     # rows are independent: parallel over rows, each scanning the particles near it
     for r in prange(rows):
         y = r * pixel
@@ -69,30 +71,23 @@ def _colour(pix_u, pix_v, normal_d, volume, h, rows, cols, pixel, out):
             c1 = min(int(math.floor((pix_u[i] + reach) / pixel)), cols - 1)
             for c in range(c0, c1 + 1):
                 dx = pix_u[i] - c * pixel
-                out[r, c] += volume[i] * cubic_w(math.sqrt(rr + dx * dx), h)
-
-
-@njit(cache=True, parallel=True)
-def _shepard(pix_u, pix_v, normal_d, disp, h, rows, cols, pixel, weight, moved):
-    n = pix_u.shape[0]
-    # as _colour: parallel over rows, each row summing the kernel-weighted displacements
-    for r in prange(rows):
-        y = r * pixel
-        for i in range(n):
-            dz = normal_d[i]
-            dy = pix_v[i] - y
-            rr = dz * dz + dy * dy
-            if rr >= h * h:
-                continue
-            reach = math.sqrt(h * h - rr)
-            c0 = max(int(math.ceil((pix_u[i] - reach) / pixel)), 0)
-            c1 = min(int(math.floor((pix_u[i] + reach) / pixel)), cols - 1)
-            for c in range(c0, c1 + 1):
-                dx = pix_u[i] - c * pixel
                 w = cubic_w(math.sqrt(rr + dx * dx), h)
-                weight[r, c] += w
-                for k in range(3):
-                    moved[r, c, k] += w * disp[i, k]
+                for k in range(m):
+                    out[r, c, k] += w * values[i, k]
+
+
+def _plane_splat(positions_mm: np.ndarray, values: np.ndarray, h: float, plane: Plane) -> np.ndarray:
+    """:func:`_splat` of ``values`` ``(N, m)`` at the particles ``positions_mm`` onto ``plane``: ``(rows, cols, m)``."""
+    d = np.asarray(positions_mm, float) - np.asarray(plane.origin_mm, float)
+    u, v = np.asarray(plane.u, float), np.asarray(plane.v, float)
+    normal = np.cross(u, v)
+    near = np.abs(d @ normal) < h
+    out = np.zeros((*plane.shape, values.shape[1]))
+    if near.any():
+        _splat(np.ascontiguousarray(d[near] @ u), np.ascontiguousarray(d[near] @ v),
+               np.ascontiguousarray(d[near] @ normal), np.ascontiguousarray(values[near], dtype=np.float64), h,
+               plane.shape[0], plane.shape[1], float(plane.pixel_mm), out)
+    return out
 
 
 def plane_displacement(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float, plane: Plane,
@@ -108,18 +103,8 @@ def plane_displacement(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm
     x = np.asarray(positions_mm, float)
     disp = x - np.asarray(rest_mm, float)
     h = smoothing_factor * float(spacing_mm)
-    o = np.asarray(plane.origin_mm, float)
-    u_ax, v_ax = np.asarray(plane.u, float), np.asarray(plane.v, float)
-    normal = np.cross(u_ax, v_ax)
-    d = x - o
-    near = np.abs(d @ normal) < h
-    rows, cols = plane.shape
-    weight = np.zeros((rows, cols))
-    moved = np.zeros((rows, cols, 3))
-    if near.any():
-        _shepard(np.ascontiguousarray(d[near] @ u_ax), np.ascontiguousarray(d[near] @ v_ax),
-                 np.ascontiguousarray(d[near] @ normal), np.ascontiguousarray(disp[near]), h, rows, cols,
-                 float(plane.pixel_mm), weight, moved)
+    sums = _plane_splat(x, np.concatenate([np.ones((len(x), 1)), disp], axis=1), h, plane)
+    weight, moved = sums[..., 0], sums[..., 1:]
     covered = weight > 0
     moved[covered] /= weight[covered][:, None]
     return moved, covered
@@ -153,17 +138,7 @@ def section(positions_mm: np.ndarray, volumes_mm3: np.ndarray, spacing_mm: float
     x = np.asarray(positions_mm, float)
     vol = np.asarray(volumes_mm3, float)
     h = smoothing_factor * float(spacing_mm)
-    o = np.asarray(plane.origin_mm, float)
-    u = np.asarray(plane.u, float)
-    v = np.asarray(plane.v, float)
-    normal = np.cross(u, v)
-    d = x - o
-    near = np.abs(d @ normal) < h
-    colour = np.zeros(plane.shape)
-    if near.any():
-        _colour(np.ascontiguousarray(d[near] @ u), np.ascontiguousarray(d[near] @ v),
-                np.ascontiguousarray(d[near] @ normal), np.ascontiguousarray(vol[near]), h,
-                plane.shape[0], plane.shape[1], float(plane.pixel_mm), colour)
+    colour = _plane_splat(x, vol[:, None], h, plane)[..., 0]
     mask = colour >= 0.5
     contours = measure.find_contours(colour, 0.5) if mask.any() else []
     if contours:
