@@ -357,4 +357,3 @@ def test_contour_residuals_are_weighted_by_the_tracking_quality_at_each_point():
     unseen = DisplacementSeries(np.zeros((3, 40, 40, 2), np.float32), np.zeros((3, 40, 40), np.float32), (0.5, 0.5))
     with pytest.raises(InputError, match="quality"):
         data.with_contour_weights(unseen, rest)
-

@@ -106,13 +106,18 @@ class ContactSet:
             closer = g < best
             best[closer], which[closer] = g[closer], k
         if self.punch is not None:
-            a = self.body_frames[self.punch_index, 0]
-            rel = x - (np.asarray(self.punch.tip_m) + advance_m * a)
-            along = rel @ a
-            across = np.linalg.norm(rel - along[:, None] * a, axis=1)
-            under = (across <= self.punch.radius_m) & (along < best)
+            along, under = self.under_face(u, advance_m)
+            under &= along < best
             best[under], which[under] = along[under], self.punch_index
         return best, which
+
+    def under_face(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every node's distance (m) beyond the punch's face along its axis, and whether it is under the face."""
+        a = self.body_frames[self.punch_index, 0]
+        rel = self.rest + u - (np.asarray(self.punch.tip_m) + advance_m * a)
+        along = rel @ a
+        across = np.linalg.norm(rel - along[:, None] * a, axis=1)
+        return along, across <= self.punch.radius_m
 
     def prescribed_normal(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For contact nodes: the normal displacement that closes their gap, as

@@ -324,12 +324,7 @@ class CreepSolver:
 
     def _follow(self, u: np.ndarray) -> None:
         """An unloaded bar's face onto the nearest tissue under it (its advance, m); kept if none is."""
-        cs = self.contacts
-        a = cs.body_frames[cs.punch_index, 0]
-        rel = self.rest_m + u - np.asarray(self.punch.tip_m)
-        along = rel @ a
-        across = np.linalg.norm(rel - along[:, None] * a, axis=1)
-        under = across <= self.punch.radius_m
+        along, under = self.contacts.under_face(u, 0.0)
         if under.any():
             self.advance_m = float(along[under].min())
 
@@ -339,11 +334,10 @@ class CreepSolver:
         force = float(self.punch.force_n(t_new)) if self.punch is not None else 0.0
         unloaded = self.punch is not None and force <= 0.0
         if unloaded:
-            # a bar with no push holds nothing: it rests on the tissue and follows it
-            # (as the twin's truth, reference.creep_fe.follow); held with zero force it would
-            # leave its advance to contacts whose reactions must sum to nothing (chatter)
+            # a bar with no push holds nothing: it rests on the tissue and follows it after each
+            # solve (as the twin's truth, reference.creep_fe.follow); held with zero force it
+            # would leave its advance to contacts whose reactions must sum to nothing (chatter)
             self.contacts.release(np.flatnonzero(self.contacts.body == self.contacts.punch_index))
-            self._follow(u)
         a, c = self._matrices(dt, mu)
         base = self.body_force.ravel() + np.repeat(self.mass, 3) / dt ** 2 * (u + dt * v).ravel()
         if c is not None:

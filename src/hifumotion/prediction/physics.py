@@ -23,7 +23,7 @@ from hifumotion.particles.section import displacement_at, plane_displacement
 
 
 def predicted_mask(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float,
-                   reference: ReferenceShape, stride_px: int | None = None) -> np.ndarray:
+                   reference: ReferenceShape, stride_px: int = 1) -> np.ndarray:
     """The predicted target mask on the imaging plane's grid (module docstring).
 
     The displacement is interpolated from the particles (Shepard, support 2 ``spacing_mm``)
@@ -33,8 +33,6 @@ def predicted_mask(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: fl
     it is slower (20 ms at stride 2) and stays for comparison only.
     """
     plane = reference.plane
-    if stride_px is None:
-        stride_px = 1
     points = plane.points_mm()
     q = points.reshape(-1, 3)
     mask = np.zeros(len(q), bool)
