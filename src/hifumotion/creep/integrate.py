@@ -39,7 +39,7 @@ import scipy.sparse as sp
 
 from hifumotion.creep.contact import SLIP, STICK, ContactSet, Plane, Punch
 from hifumotion.creep.hexahedra import MeshMatrices
-from hifumotion.creep.linear import Factor, preconditioned_cg
+from hifumotion.creep.linear import Factor, FactorError, preconditioned_cg, refined_solve
 from hifumotion.creep.voxels import VoxelMesh
 from hifumotion.errors import InputError
 
@@ -102,8 +102,14 @@ class CreepSettings:
         Rounds of the active-set rules per step.
     cg_iterations, cg_rtol
         Conjugate-gradient budget before a fresh factorisation, and its relative residual.
+    friction_rtol
+        A step's rounds end when no contact changed and the slipping contacts' normal
+        reactions (which set their friction, μ_f λ_n) moved by less than this, relatively.
     solver
         ``"pardiso"``, ``"superlu"`` or None (the best installed).
+    precision
+        ``"mixed"``: the factorisation in single precision, its solutions refined by conjugate
+        gradients to ``cg_rtol`` (:mod:`.linear`); ``"double"``: a double-precision factor.
     """
 
     tolerance: float = 0.005
@@ -113,7 +119,9 @@ class CreepSettings:
     max_rounds: int = 30
     cg_iterations: int = 12
     cg_rtol: float = 1e-9
+    friction_rtol: float = 1e-3
     solver: str | None = None
+    precision: str = "mixed"
 
 
 @dataclass
@@ -178,7 +186,7 @@ class CreepSolver:
         self._factor_key = None
         self._reduction_key = None
         self.stats = {"steps": 0, "rejected": 0, "factorisations": 0, "solves": 0, "cg_iterations": 0,
-                      "rounds": 0, "max_penetration_mm": 0.0}
+                      "rounds": 0, "friction_rounds": 0, "max_penetration_mm": 0.0}
 
     # -- the linear system ------------------------------------------------------------
     def _matrices(self, dt: float, mu: np.ndarray | None) -> tuple[sp.csr_matrix, sp.csr_matrix | None]:
@@ -265,14 +273,31 @@ class CreepSolver:
             self.stats["cg_iterations"] += its
             if ok:
                 return t @ q + g, (q[s_col] if s_col >= 0 else None)
-        if self._factor is not None:
-            self._factor.release()
-        self._factor = Factor(reduced, self.settings.solver)
+        q = self._factorise(reduced, rhs_q)
         self._factor_key = full_key
         self._factor_codes = self._codes
-        self.stats["factorisations"] += 1
-        q = self._factor.solve(rhs_q)
         return t @ q + g, (q[s_col] if s_col >= 0 else None)
+
+    def _factorise(self, reduced: sp.csr_matrix, rhs_q: np.ndarray) -> np.ndarray:
+        """A fresh factorisation of ``reduced`` (in the last one's place: the analysis is kept on
+        the same pattern) and the solution of ``rhs_q`` to ``cg_rtol``."""
+        precision = self.settings.precision
+        for attempt in (precision, "double"):
+            if self._factor is None:
+                self._factor = Factor(reduced, self.settings.solver, attempt)
+            else:
+                self._factor.refactor(reduced, attempt)
+            self.stats["factorisations"] += 1
+            try:
+                q, its = refined_solve(reduced, self._factor, rhs_q, self.settings.cg_rtol,
+                                       self.settings.cg_iterations)
+                self.stats["cg_iterations"] += its
+                return q
+            except FactorError:
+                # a system a single-precision factor cannot precondition (a body held by
+                # nothing but its anchor springs while it settles): a double one
+                self.stats["double_factorisations"] = self.stats.get("double_factorisations", 0) + 1
+        raise FactorError("the creep's linear system could not be solved")  # pragma: no cover
 
     def _reduced(self, a: sp.csr_matrix, t: sp.csr_matrix) -> sp.csr_matrix:
         """Tᵀ A T, kept while the step's matrix and the contact set are the same."""
@@ -366,11 +391,14 @@ class CreepSolver:
             if self.punch is not None and force > 0 and not np.any(cs.body == cs.punch_index):
                 self._engage_punch(unew, force)
                 changed = True
-            settled_friction = (len(slip) == 0 or np.allclose(cs.pressure[slip], old_pressure, rtol=1e-6,
+            settled_friction = (len(slip) == 0 or np.allclose(cs.pressure[slip], old_pressure,
+                                                                rtol=self.settings.friction_rtol,
                                                                 atol=1e-12 * max(force, 1e-30)))
             guess = new
             if not changed and settled_friction:
                 break
+            if not changed:
+                self.stats["friction_rounds"] += 1
         gap, which = cs.gaps(unew, self.advance_m)
         touching = cs.body >= 0
         worst = float(np.max(-gap[~touching], initial=0.0)) / MM
