@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from hifumotion.creep.contact import SLIP, STICK, ContactSet, Plane, Punch
-from hifumotion.creep.hexahedra import MeshMatrices
+from hifumotion.creep.hexahedra import MeshMatrices, _positions
 from hifumotion.creep.linear import Factor, FactorError, preconditioned_cg, refined_solve
 from hifumotion.creep.voxels import VoxelMesh
 from hifumotion.errors import InputError
@@ -179,6 +179,7 @@ class CreepSolver:
         for c in range(3):
             np.add.at(self.body_force[:, c], mesh.elements.ravel(), np.repeat(weight * grav[c] / 8.0, 8))
         self.diag_index = np.flatnonzero(rows == self.assembly.indices)
+        self._unit = float(np.abs(self.k_data[self.diag_index]).mean())
         self.contacts = ContactSet(self.rest_m, planes, punch)
         self.punch = punch
         self.advance_m = 0.0
@@ -201,24 +202,29 @@ class CreepSolver:
         return sp.csr_matrix((data, asm.indices, asm.indptr), shape=(asm.size, asm.size)), c
 
     def _reduction(self):
-        """``u = T q + g (+ s column)`` for the current contact set (cached by its version)."""
+        """``u = T q + g`` for the current contact set (cached by its version).
+
+        The unknowns are the same for every contact set, so the reduced system keeps one
+        sparsity pattern (its ordering and symbolic factorisation are made once): node i's
+        three ``q`` are its displacement along the axes (free) or along its contact's frame
+        (normal, two tangents), and a last one is the bar's advance s when there is a bar.
+        A constrained unknown (a contact's normal, a stuck contact's tangents) has a zero
+        column in T — its value is in ``g``, or in the s column for the bar's contacts — and
+        an identity row in the reduced system. Returns (T, g, s's column or −1, constrained)."""
         key = self.contacts.version
         if self._reduction_key == key:
-            return self._t, self._g_const, self._s_col
+            return self._t, self._g_const, self._s_col, self._constrained
         cs = self.contacts
         n = len(self.rest_m)
         rows, cols, vals = [], [], []
         g = np.zeros((n, 3))
         free = np.flatnonzero(cs.body < 0)
-        # a code per reduced unknown (node·8 + 0–2 a free axis, + 3–4 a slip tangent; −1 the
-        # bar's advance): how the unknowns of two contact sets correspond
-        codes = [(8 * free[:, None] + np.arange(3)).ravel()]
         rows.append((3 * free[:, None] + np.arange(3)).ravel())
-        cols.append(np.arange(3 * len(free)))
+        cols.append(rows[-1])
         vals.append(np.ones(3 * len(free)))
-        col = 3 * len(free)
         contact = np.flatnonzero(cs.body >= 0)
-        s_col = -1
+        s_col = 3 * n if self.punch is not None else -1
+        constrained = [3 * contact]
         if len(contact):
             frames = cs.frames_of(contact)
             const, coef = cs.prescribed_normal(contact)
@@ -226,56 +232,71 @@ class CreepSolver:
             stick = cs.status[contact] == STICK
             held = np.einsum("nk,nak->na", cs.anchor[contact], frames[:, 1:])
             g[contact[stick]] += np.einsum("na,nak->nk", held[stick], frames[stick, 1:])
+            constrained += [3 * contact[stick] + 1, 3 * contact[stick] + 2]
             slip = np.flatnonzero(cs.status[contact] == SLIP)
             for a in (1, 2):
-                codes.append(8 * contact[slip] + 2 + a)
                 rows.append((3 * contact[slip][:, None] + np.arange(3)).ravel())
-                cols.append(np.repeat(col + np.arange(len(slip)), 3))
+                cols.append(np.repeat(3 * contact[slip] + a, 3))
                 vals.append(frames[slip, a].ravel())
-                col += len(slip)
             on_punch = np.flatnonzero(coef != 0)
             if len(on_punch):
-                s_col = col
-                codes.append(np.array([-1]))
                 rows.append((3 * contact[on_punch][:, None] + np.arange(3)).ravel())
                 cols.append(np.full(3 * len(on_punch), s_col))
                 vals.append(frames[on_punch, 0].ravel())
-                col += 1
-        t = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(3 * n, col))
-        self._t, self._g_const, self._s_col = t, g.ravel(), s_col
-        self._codes = np.concatenate(codes)
+        size = 3 * n + (1 if s_col >= 0 else 0)
+        if s_col >= 0 and not np.any(cs.body == cs.punch_index):
+            constrained.append(np.array([s_col]))   # a bar touching nothing: no unknown of the tissue's
+        t = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, size))
+        self._t, self._g_const = t, g.ravel()
+        self._s_col = s_col if s_col >= 0 and np.any(cs.body == cs.punch_index) else -1
+        self._constrained = np.concatenate(constrained).astype(np.int64)
         self._reduction_key = key
-        return self._t, self._g_const, self._s_col
+        return self._t, self._g_const, self._s_col, self._constrained
+
+    def _fixed_pattern(self, size: int):
+        """The reduced system's one CSR pattern: the mesh's node-pair blocks, plus a full row and
+        column for the bar's advance (its contacts may be any nodes), and where entries go."""
+        if getattr(self, "_pattern_size", None) != size:
+            asm = self.assembly
+            ones = sp.csr_matrix((np.ones(len(asm.indices)), asm.indices, asm.indptr), shape=(asm.size, asm.size))
+            if size > asm.size:
+                edge = sp.csr_matrix(np.ones((1, asm.size)))
+                ones = sp.bmat([[ones, edge.T], [edge, sp.csr_matrix(np.ones((1, 1)))]], format="csr")
+            ones.sort_indices()
+            self._pattern = (ones.indptr.astype(np.int64), ones.indices.astype(np.int64))
+            rows = np.repeat(np.arange(size), np.diff(ones.indptr))
+            self._pattern_diag = np.flatnonzero(rows == ones.indices)
+            self._pattern_size = size
+        return self._pattern
 
     def _solve(self, a: sp.csr_matrix, rhs: np.ndarray, force_n: float, key, guess: np.ndarray | None):
-        t, g, s_col = self._reduction()
+        t, g, s_col, constrained = self._reduction()   # s_col −1: no bar, or one touching nothing
         rhs_q = t.T @ (rhs - a @ g)
         if s_col >= 0:
             rhs_q[s_col] += force_n
+        rhs_q[constrained] = 0.0
         self.stats["solves"] += 1
         # the guess in reduced unknowns: T's columns are orthonormal but the bar's advance's
         x0 = None if guess is None else t.T @ (guess - g)
         if s_col >= 0 and guess is not None:
             x0[s_col] = self.advance_m
+        if x0 is not None:
+            x0[constrained] = 0.0
         full_key = (self.contacts.version, key)
-        # the last factorisation preconditions any later matrix: a new μ or Δt changes values;
-        # a contact set a few nodes apart changes a few unknowns, which the preconditioner maps
-        # by their codes (those it never knew get their diagonal). A fresh factorisation only
-        # when conjugate gradients need more than their budget.
+        # the last factorisation preconditions any later matrix (the same unknowns, the same
+        # pattern): a new μ or Δt changes values, a contact set a few nodes apart a few rows.
+        # A fresh factorisation only when conjugate gradients need more than their budget.
         reduced = self._reduced(a, t)
         if self._factor is not None and x0 is not None:
             def apply(q):
                 return reduced @ q
-            precondition = self._factor if self._factor_key[0] == full_key[0] else self._mapped(a)
-            q, its, ok = preconditioned_cg(apply, rhs_q, precondition, x0, self.settings.cg_rtol,
+            q, its, ok = preconditioned_cg(apply, rhs_q, self._factor, x0, self.settings.cg_rtol,
                                            self.settings.cg_iterations)
             self.stats["cg_iterations"] += its
             if ok:
                 return t @ q + g, (q[s_col] if s_col >= 0 else None)
         q = self._factorise(reduced, rhs_q)
         self._factor_key = full_key
-        self._factor_codes = self._codes
         return t @ q + g, (q[s_col] if s_col >= 0 else None)
 
     def _factorise(self, reduced: sp.csr_matrix, rhs_q: np.ndarray) -> np.ndarray:
@@ -300,36 +321,25 @@ class CreepSolver:
         raise FactorError("the creep's linear system could not be solved")  # pragma: no cover
 
     def _reduced(self, a: sp.csr_matrix, t: sp.csr_matrix) -> sp.csr_matrix:
-        """Tᵀ A T, kept while the step's matrix and the contact set are the same."""
+        """Tᵀ A T on the fixed pattern, identity on the constrained unknowns; kept while the
+        step's matrix and the contact set are the same."""
         key = (id(a), self.contacts.version)
         if getattr(self, "_reduced_key", None) != key:
-            self._reduced_matrix = (t.T @ a @ t).tocsr()
+            size = t.shape[1]
+            indptr, indices = self._fixed_pattern(size)
+            product = (t.T @ a @ t).tocoo()
+            data = np.zeros(len(indices))
+            data[_positions(indptr, indices, product.row.astype(np.int64), product.col.astype(np.int64))] = product.data
+            # a constrained unknown's row is the identity times its node's mean diagonal (q = 0
+            # there): the scale it has when it is free, so that the factorisation of one contact
+            # set preconditions the next
+            node_scale = np.append(a.diagonal().reshape(-1, 3).mean(axis=1), self._unit)
+            data[self._pattern_diag[self._constrained]] = node_scale[np.minimum(self._constrained // 3,
+                                                                                len(node_scale) - 1)]
+            self._reduced_matrix = sp.csr_matrix((data, indices, indptr), shape=(size, size))
             self._reduced_key = key
             self._reduced_of = a  # holds ``a`` alive, so its id is not reused while cached
         return self._reduced_matrix
-
-    def _mapped(self, a: sp.csr_matrix):
-        """The last factorisation as a preconditioner of the current contact set's system."""
-        old, new = self._factor_codes, self._codes
-        order = np.argsort(old)
-        at = np.searchsorted(old[order], new)
-        at = np.minimum(at, len(old) - 1)
-        known = old[order][at] == new
-        where = order[at[known]]
-        diag = np.asarray(self._reduced(a, self._t).diagonal()) if (~known).any() else None
-        factor = self._factor
-
-        class Mapped:
-            def solve(self, r):
-                full = np.zeros(len(old))
-                full[where] = r[known]
-                z = np.empty_like(r)
-                z[known] = factor.solve(full)[where]
-                if diag is not None:
-                    z[~known] = r[~known] / diag[~known]
-                return z
-
-        return Mapped()
 
     # -- one step ---------------------------------------------------------------------
     def _engage_punch(self, u: np.ndarray, force_n: float) -> None:
