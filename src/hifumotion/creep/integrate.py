@@ -179,12 +179,11 @@ class CreepSolver:
         for c in range(3):
             np.add.at(self.body_force[:, c], mesh.elements.ravel(), np.repeat(weight * grav[c] / 8.0, 8))
         self.diag_index = np.flatnonzero(rows == self.assembly.indices)
-        self._unit = float(np.abs(self.k_data[self.diag_index]).mean())
         self.contacts = ContactSet(self.rest_m, planes, punch)
         self.punch = punch
+        self._fixed_pattern()
         self.advance_m = 0.0
         self._factor: Factor | None = None
-        self._factor_key = None
         self._reduction_key = None
         self.stats = {"steps": 0, "rejected": 0, "factorisations": 0, "solves": 0, "cg_iterations": 0,
                       "rounds": 0, "friction_rounds": 0, "max_penetration_mm": 0.0}
@@ -245,31 +244,29 @@ class CreepSolver:
                 vals.append(frames[on_punch, 0].ravel())
         size = 3 * n + (1 if s_col >= 0 else 0)
         if s_col >= 0 and not np.any(cs.body == cs.punch_index):
-            constrained.append(np.array([s_col]))   # a bar touching nothing: no unknown of the tissue's
+            # a bar touching nothing: its advance is no unknown of the tissue's (an identity row)
+            constrained.append(np.array([s_col]))
+            s_col = -1
         t = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, size))
-        self._t, self._g_const = t, g.ravel()
-        self._s_col = s_col if s_col >= 0 and np.any(cs.body == cs.punch_index) else -1
+        self._t, self._g_const, self._s_col = t, g.ravel(), s_col
         self._constrained = np.concatenate(constrained).astype(np.int64)
         self._reduction_key = key
         return self._t, self._g_const, self._s_col, self._constrained
 
-    def _fixed_pattern(self, size: int):
+    def _fixed_pattern(self) -> None:
         """The reduced system's one CSR pattern: the mesh's node-pair blocks, plus a full row and
-        column for the bar's advance (its contacts may be any nodes), and where entries go."""
-        if getattr(self, "_pattern_size", None) != size:
-            asm = self.assembly
-            ones = sp.csr_matrix((np.ones(len(asm.indices)), asm.indices, asm.indptr), shape=(asm.size, asm.size))
-            if size > asm.size:
-                edge = sp.csr_matrix(np.ones((1, asm.size)))
-                ones = sp.bmat([[ones, edge.T], [edge, sp.csr_matrix(np.ones((1, 1)))]], format="csr")
-            ones.sort_indices()
-            self._pattern = (ones.indptr.astype(np.int64), ones.indices.astype(np.int64))
-            rows = np.repeat(np.arange(size), np.diff(ones.indptr))
-            self._pattern_diag = np.flatnonzero(rows == ones.indices)
-            self._pattern_size = size
-        return self._pattern
+        column for the bar's advance (its contacts may be any nodes); and where its diagonal is."""
+        asm = self.assembly
+        ones = sp.csr_matrix((np.ones(len(asm.indices)), asm.indices, asm.indptr), shape=(asm.size, asm.size))
+        if self.punch is not None:
+            edge = sp.csr_matrix(np.ones((1, asm.size)))
+            ones = sp.bmat([[ones, edge.T], [edge, sp.csr_matrix(np.ones((1, 1)))]], format="csr")
+        ones.sort_indices()
+        self._pattern = (ones.indptr.astype(np.int64), ones.indices.astype(np.int64))
+        rows = np.repeat(np.arange(ones.shape[0]), np.diff(ones.indptr))
+        self._pattern_diag = np.flatnonzero(rows == ones.indices)
 
-    def _solve(self, a: sp.csr_matrix, rhs: np.ndarray, force_n: float, key, guess: np.ndarray | None):
+    def _solve(self, a: sp.csr_matrix, rhs: np.ndarray, force_n: float, guess: np.ndarray | None):
         t, g, s_col, constrained = self._reduction()   # s_col −1: no bar, or one touching nothing
         rhs_q = t.T @ (rhs - a @ g)
         if s_col >= 0:
@@ -282,7 +279,6 @@ class CreepSolver:
             x0[s_col] = self.advance_m
         if x0 is not None:
             x0[constrained] = 0.0
-        full_key = (self.contacts.version, key)
         # the last factorisation preconditions any later matrix (the same unknowns, the same
         # pattern): a new μ or Δt changes values, a contact set a few nodes apart a few rows.
         # A fresh factorisation only when conjugate gradients need more than their budget.
@@ -296,7 +292,6 @@ class CreepSolver:
             if ok:
                 return t @ q + g, (q[s_col] if s_col >= 0 else None)
         q = self._factorise(reduced, rhs_q)
-        self._factor_key = full_key
         return t @ q + g, (q[s_col] if s_col >= 0 else None)
 
     def _factorise(self, reduced: sp.csr_matrix, rhs_q: np.ndarray) -> np.ndarray:
@@ -326,14 +321,15 @@ class CreepSolver:
         key = (id(a), self.contacts.version)
         if getattr(self, "_reduced_key", None) != key:
             size = t.shape[1]
-            indptr, indices = self._fixed_pattern(size)
+            indptr, indices = self._pattern
             product = (t.T @ a @ t).tocoo()
             data = np.zeros(len(indices))
             data[_positions(indptr, indices, product.row.astype(np.int64), product.col.astype(np.int64))] = product.data
             # a constrained unknown's row is the identity times its node's mean diagonal (q = 0
             # there): the scale it has when it is free, so that the factorisation of one contact
             # set preconditions the next
-            node_scale = np.append(a.diagonal().reshape(-1, 3).mean(axis=1), self._unit)
+            diagonal = a.diagonal()
+            node_scale = np.append(diagonal.reshape(-1, 3).mean(axis=1), diagonal.mean())
             data[self._pattern_diag[self._constrained]] = node_scale[np.minimum(self._constrained // 3,
                                                                                 len(node_scale) - 1)]
             self._reduced_matrix = sp.csr_matrix((data, indices, indptr), shape=(size, size))
@@ -363,8 +359,8 @@ class CreepSolver:
         if under.any():
             self.advance_m = float(along[under].min())
 
-    def step(self, u: np.ndarray, v: np.ndarray, t_new: float, dt: float, mu: np.ndarray | None,
-             key) -> tuple[np.ndarray, float]:
+    def step(self, u: np.ndarray, v: np.ndarray, t_new: float, dt: float,
+             mu: np.ndarray | None) -> tuple[np.ndarray, float]:
         """Displacement (m, (n, 3)) at ``t_new`` after a step ``dt`` from (u, v); the bar's force taken."""
         force = float(self.punch.force_n(t_new)) if self.punch is not None else 0.0
         unloaded = self.punch is not None and force <= 0.0
@@ -389,7 +385,7 @@ class CreepSolver:
                 mu_f = cs.friction[cs.body[slip]]
                 friction = (mu_f * cs.pressure[slip])[:, None] * cs.direction[slip]
                 rhs.reshape(-1, 3)[slip] += friction
-            new, s = self._solve(a, rhs, force, key, guess)
+            new, s = self._solve(a, rhs, force, guess)
             if s is not None:
                 self.advance_m = float(s)
             if unloaded:
@@ -434,8 +430,8 @@ class CreepSolver:
         # (each from rest: inertia keeps a body that touches at a point well posed until its
         # contact patch has formed), then static equilibrium under gravity, no viscosity
         u = np.zeros((n, 3))
-        for k, dt_settle in enumerate(SETTLE_STEPS_S):
-            u, _ = self.step(u, np.zeros((n, 3)), 0.0, dt_settle, None, ("settle", k))
+        for dt_settle in SETTLE_STEPS_S:
+            u, _ = self.step(u, np.zeros((n, 3)), 0.0, dt_settle, None)
         if self.punch is not None:
             # the bar starts resting on the tissue (a gap would be crossed in no time by a
             # quasi-static push, and its travel counted as motion)
@@ -463,7 +459,7 @@ class CreepSolver:
             adv0 = self.advance_m
             version0 = cs.version
             state = (cs.body.copy(), cs.status.copy(), cs.anchor.copy(), cs.direction.copy(), cs.pressure.copy())
-            unew, taken = self.step(u, v, t + dt, dt, mu, round(dt, 12))
+            unew, taken = self.step(u, v, t + dt, dt, mu)
             vnew = (unew - u) / dt
             err = 0.5 * dt * np.abs(vnew - v).max()
             if err > 2.0 * st.tolerance * self.dx_m and dt > 1e-6 * base and not (t == 0.0 and level < -12):
