@@ -127,7 +127,11 @@ def test_fast_path_agrees_with_the_finite_element_reference():
 
     scene = Scene()
     scene.tissue.beta1 = 0.0  # the relaxed limit the reference solves
-    scene.physics.friction = 100.0  # the reference's floor is stuck
+    # the reference's floor and bar are stuck; a rough floor (μ = 3: nothing here pulls sideways
+    # by a third of its push) is their limit. (μ ≫ 1 is out of the fast path's reach: its rounds
+    # take the friction at the last round's normal reactions, and at μ = 100 an edge node of
+    # the patch chatters on and off the floor — docs/decisions.md)
+    scene.physics.friction = 3.0
     scene.particles.spacing_mm = 2.0
     scene.run.duration_s, scene.run.output_interval_s = 1.0, 0.5
     mesh, _ = tissue_mesh(scene)
@@ -143,7 +147,8 @@ def test_fast_path_agrees_with_the_finite_element_reference():
     u_fast = sim.tissue_mm[-1] - mesh.centres_mm
     u_ref = ref.at(mesh.centres_mm)
     rms = math.sqrt(((u_fast - u_ref) ** 2).sum(1).mean())
-    # measured 0.09 of the peak at 2 mm (benchmarks/bench_fe_reference.py: it falls as the spacing does)
+    # measured 0.14 of the peak at 2 mm (0.12 with the rigid stick/slip of before the elastic stick;
+    # benchmarks/bench_fe_reference.py: it falls as the spacing does)
     assert rms <= 0.15 * np.linalg.norm(u_ref, axis=1).max()
 
 
@@ -194,3 +199,46 @@ def test_clamped_beam_sags_as_beam_theory_says():
         assert sag == pytest.approx(euler, rel=0.03)
         errors.append(abs(sag - timoshenko))
     assert errors[1] < errors[0]
+
+
+def _rigid_block_on_elastic_stick(times_s, accel_push, mu, g, eps_m):
+    """x(t) (m) of a rigid block from rest, pushed at ``accel_push`` = F/M against friction
+    μ M g min(x/ε, 1): harmonic until x = ε (ω² = μ g/ε), then at F/M − μ g."""
+    if mu == 0:
+        return 0.5 * accel_push * times_s ** 2
+    omega = math.sqrt(mu * g / eps_m)
+    x_eq = accel_push / omega ** 2
+    t1 = math.acos(1 - eps_m / x_eq) / omega
+    v1 = accel_push / omega * math.sin(omega * t1)
+    late = times_s - t1
+    return np.where(times_s < t1, x_eq * (1 - np.cos(omega * times_s)),
+                    eps_m + v1 * late + 0.5 * (accel_push - mu * g) * late ** 2)
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.5])
+def test_a_block_pushed_along_a_rough_floor_sticks_below_coulombs_limit_and_slides_at_its_rate_above(mu):
+    # a stiff cube (E/ρg·side ~ 10⁴) pushed sideways by a frictionless bar at mid-height:
+    # below μ M g it sticks — nothing moves beyond the elastic stick's reach ε (and the cube's
+    # own compression, 10⁻⁸ m here); above it, it slides as a rigid block whose friction is
+    # μ M g min(x/ε, 1) (an analytic motion), to backward Euler's first-order error, held
+    # small by a tight step tolerance
+    n, rho, g, e = 3, 1000.0, 9.81, 1e6
+    side = n * MM
+    mass = rho * side ** 3
+    mesh = voxel_mesh(block(n), 1.0)
+    eps_mm = CreepSettings().stick_mm
+    for ratio in ((0.5, 2.0) if mu > 0 else (2.0,)):
+        force = ratio * max(mu, 0.5) * mass * g
+        punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
+        solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho), Surroundings((0.0, -g, 0.0)),
+                             [Plane((0, 0, 0), (0, 1, 0), mu)], punch, CreepSettings(tolerance=1e-4))
+        times = np.array([0.0, 0.01, 0.02])
+        r = solver.run(times)
+        if force < mu * mass * g:
+            assert np.abs(r.advance_mm).max() <= 1.05 * eps_mm
+            bottom = mesh.nodes_mm[:, 1] < 1e-9
+            assert np.abs(r.nodes_mm[-1][bottom, 0] - r.nodes_mm[0][bottom, 0]).max() <= eps_mm
+        else:
+            expected = _rigid_block_on_elastic_stick(times, force / mass, mu, g, eps_mm * MM) / MM
+            np.testing.assert_allclose(r.advance_mm[1:], expected[1:], rtol=0.02)
+            assert r.bar_force_n[-1] == pytest.approx(force, rel=1e-6)

@@ -1,15 +1,34 @@
 """Contacts as constraints: rigid planes (floor, tank walls) and the bar's flat end (SI).
 
 A node in contact is held *on* the solid's surface — its normal displacement is
-prescribed, so no tissue crosses the floor or the bar, at any spacing — and either
-**sticks** (its tangential displacement held where it touched) or **slips** (tangential
-free, pushed back by the Coulomb force μ_f λ_n against the way it would go). The sets
-change by the usual active-set rules (Wriggers, *Computational Contact Mechanics*, §6):
+prescribed, so no tissue crosses the floor or the bar, at any spacing. Along the surface
+it meets Coulomb's friction with an elastic stick (the FE reference's law,
+:mod:`hifumotion.reference.creep_fe`): the tangential force is
 
-* a free node that has crossed a surface becomes a stuck contact;
-* a contact that pulls (λ_n < 0) is released;
-* a stuck contact whose tangential reaction exceeds μ_f λ_n slips, the friction along it;
-* a slipping node that would move along its friction force sticks again.
+    f = μ_f λ_n d / max(|d|, ε),
+
+``d`` the node's tangential displacement from its anchor and ε the stick's reach, a
+micrometre — a contact sticks elastically up to ε and slides beyond it at μ_f λ_n, its
+anchor dragged along to ε (:meth:`ContactSet.slide`). Unlike the rigid stick/slip
+switch the law is continuous, so the motion is a continuous function of the load and
+the parameters (a release does not hang on which node switches first).
+:func:`friction_linearised` gives its tangent for the integrator's rounds. The set
+changes by the usual active-set rules (Wriggers, *Computational Contact Mechanics*, §6):
+
+* a free node that has crossed a surface becomes a contact, anchored where it is; until
+  its first reaction is known, its friction's size μ_f λ_n takes the mean normal reaction
+  of the solid's other contacts (the integrator gives the bar's first ones their share of
+  its force). Without friction in that round, a body touching at a few points and then
+  at many swings out of place, and the next rounds' friction, lagging the normal
+  reactions, does not bring it back;
+* a contact that pulls (λ_n < 0) is released — but not on its first reaction, which that
+  guessed friction made (it takes a zero one and the next round decides); one released
+  within a step comes back in that step only if it crosses by ``left_tolerance_m`` (an
+  edge node of a rough patch can otherwise chatter on and off the surface, as the FE
+  reference's rule has it).
+
+A bonded plane (a clamp) holds its nodes rigidly: their tangential displacement is
+prescribed too (status STICK), and they are never released.
 
 The bar is a rigid punch translating along its axis only (a bar in a guide, as the
 explicit path's): its advance ``s`` (m) is one more unknown, and its force schedule F(t)
@@ -23,7 +42,54 @@ from typing import Callable
 
 import numpy as np
 
+#: a node's status: free, held rigidly (a bonded plane's), or in frictional contact
 FREE, STICK, SLIP = 0, 1, 2
+
+
+@dataclass
+class FrictionLinearised:
+    """Coulomb's regularised law linearised at ``d0`` for ``nodes``: f ≈ c + S d (N; d in m,
+    the node's tangential displacement from its anchor in its contact frame's tangents)."""
+
+    nodes: np.ndarray          # (m,) node indices
+    anchor_t: np.ndarray       # (m, 2) the anchors in the tangents (m)
+    limit_n: np.ndarray        # (m,) μ_f λ_n (N): the largest friction force
+    constant_n: np.ndarray     # (m, 2) c (N)
+    stiffness_n_m: np.ndarray  # (m, 2, 2) S (N/m)
+
+    def error_n(self, d_m: np.ndarray, limit_n: np.ndarray, eps_m: float) -> np.ndarray:
+        """|f(d) − (c + S d)| per node (N), f at the given limits μ_f λ_n."""
+        exact = friction_force(d_m, limit_n, eps_m)
+        approx = self.constant_n + np.einsum("nab,nb->na", self.stiffness_n_m, d_m)
+        return np.linalg.norm(exact - approx, axis=1)
+
+
+def friction_force(d_m: np.ndarray, limit_n: np.ndarray, eps_m: float) -> np.ndarray:
+    """The regularised Coulomb force μ_f λ_n d / max(|d|, ε) (N, (m, 2)) opposing ``d`` (m, (m, 2))."""
+    size = np.linalg.norm(d_m, axis=1)
+    return limit_n[:, None] * d_m / np.maximum(size, eps_m)[:, None]
+
+
+def friction_linearised(nodes: np.ndarray, anchor_t: np.ndarray, d0_m: np.ndarray, limit_n: np.ndarray,
+                        eps_m: float, newton: bool = True) -> FrictionLinearised:
+    """The law's linearisation at ``d0`` (m, (m, 2)).
+
+    Inside the stick (|d0| ≤ ε) it is exact: S = μ_f λ_n/ε I, c = 0. Beyond it, ``newton``
+    takes the tangent: S = μ_f λ_n/|d0| (I − d̂0 d̂0ᵀ), c = μ_f λ_n d̂0 (the force's size is
+    fixed, only its direction turns); otherwise the secant S = μ_f λ_n/|d0| I, c = 0, whose
+    rounds always settle (iteratively reweighted, as the FE reference's) but only linearly."""
+    size = np.linalg.norm(d0_m, axis=1)
+    reach = np.maximum(size, eps_m)
+    eye = np.eye(2)
+    stiffness = (limit_n / reach)[:, None, None] * np.broadcast_to(eye, (len(size), 2, 2))
+    constant = np.zeros_like(d0_m)
+    if newton:
+        beyond = size > eps_m
+        unit = d0_m[beyond] / size[beyond, None]
+        stiffness = stiffness.copy()
+        stiffness[beyond] -= (limit_n[beyond] / size[beyond])[:, None, None] * np.einsum("na,nb->nab", unit, unit)
+        constant[beyond] = limit_n[beyond, None] * unit
+    return FrictionLinearised(nodes, anchor_t, limit_n, constant, stiffness)
 
 
 @dataclass(frozen=True)
@@ -69,9 +135,9 @@ class ContactSet:
     """Which nodes touch which solid, stuck or slipping.
 
     ``body[i]``: −1 free, ``0 … P−1`` the planes, ``P`` the punch; ``status[i]`` FREE,
-    STICK or SLIP; ``anchor[i]`` the held tangential displacement (m) of a stuck node;
-    ``direction[i]`` the unit friction direction on a slipping one; ``pressure[i]`` its
-    last normal reaction (N).
+    STICK (held rigidly by a bonded plane) or SLIP (in frictional contact); ``anchor[i]``
+    the displacement (m) its friction pulls it back to (module docstring); ``pressure[i]``
+    its last normal reaction (N); ``fresh[i]``: touched, its first reaction not yet known.
     """
 
     def __init__(self, rest_m: np.ndarray, planes: list[Plane], punch: Punch | None):
@@ -82,8 +148,9 @@ class ContactSet:
         self.body = np.full(n, -1, np.int64)
         self.status = np.zeros(n, np.int64)
         self.anchor = np.zeros((n, 3))
-        self.direction = np.zeros((n, 3))
         self.pressure = np.zeros(n)
+        self.fresh = np.zeros(n, bool)
+        self.left = np.zeros(n, bool)   # released within the current step
         normals = [np.asarray(p.normal, float) for p in self.planes]
         if punch is not None:
             normals.append(np.asarray(punch.axis, float))
@@ -135,13 +202,16 @@ class ContactSet:
         return const, coef
 
     def touch(self, nodes: np.ndarray, bodies: np.ndarray, u: np.ndarray) -> None:
-        """Make ``nodes`` stuck contacts of ``bodies``, held where they are now."""
+        """Make ``nodes`` contacts of ``bodies``, anchored where they are now."""
         if len(nodes) == 0:
             return
+        held = (self.body >= 0) & (self.pressure > 0)
+        for b in np.unique(bodies):
+            mine = held & (self.body == b)
+            self.pressure[nodes[bodies == b]] = self.pressure[mine].mean() if mine.any() else 0.0
         self.body[nodes] = bodies
-        # on a frictionless solid a contact slips from the start (it has nothing to stick with)
-        self.status[nodes] = np.where((self.friction[bodies] > 0) | self.bonded[bodies], STICK, SLIP)
-        self.direction[nodes] = 0.0
+        self.fresh[nodes] = True
+        self.status[nodes] = np.where(self.bonded[bodies], STICK, SLIP)
         self.anchor[nodes] = u[nodes]
         self.version += 1
 
@@ -151,59 +221,72 @@ class ContactSet:
         self.body[nodes] = -1
         self.status[nodes] = FREE
         self.pressure[nodes] = 0.0
+        self.fresh[nodes] = False
         self.version += 1
 
     def frames_of(self, nodes: np.ndarray) -> np.ndarray:
         return self.body_frames[self.body[nodes]]
 
-    def update(self, u: np.ndarray, u_start: np.ndarray, reaction: np.ndarray, advance_m: float,
-               tolerance_m: float, restick: bool = True) -> bool:
-        """One round of the active-set rules (module docstring); True if anything changed.
+    def frictional(self) -> np.ndarray:
+        """The contacts whose tangential motion meets friction (not bonded, μ_f > 0)."""
+        contact = np.flatnonzero(self.status == SLIP)
+        return contact[self.friction[self.body[contact]] > 0]
 
-        ``u`` the displacement just solved (m), ``u_start`` at the start of the step,
-        ``reaction`` the constraint forces on the nodes (N, (n, 3)). ``restick=False``
-        keeps slipping nodes slipping (within a step, so stick and slip do not chatter).
+    def tangential(self, nodes: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``nodes``' displacement (m) in their contact frames' tangents, ``(m, 2)``."""
+        return np.einsum("nk,nak->na", u[nodes], self.frames_of(nodes)[:, 1:])
+
+    def slide(self, u: np.ndarray, eps_m: float) -> None:
+        """End of a step: a contact farther than ε from its anchor has slid; its anchor follows to ε."""
+        nodes = self.frictional()
+        if len(nodes) == 0:
+            return
+        frames = self.frames_of(nodes)[:, 1:]
+        d = self.tangential(nodes, u) - self.tangential(nodes, self.anchor)
+        size = np.linalg.norm(d, axis=1)
+        far = size > eps_m
+        shift = d[far] * (1.0 - eps_m / size[far])[:, None]
+        self.anchor[nodes[far]] += np.einsum("na,nak->nk", shift, frames[far])
+
+    def record_pressure(self, reaction: np.ndarray) -> np.ndarray:
+        """The contacts' normal reactions (N) from the constraint forces ``reaction`` (N, (n, 3)),
+        kept (≥ 0) in ``pressure``; returned signed, in the order of the contacts."""
+        contact = np.flatnonzero(self.body >= 0)
+        normal = np.einsum("nk,nk->n", reaction[contact], self.frames_of(contact)[:, 0])
+        self.pressure[contact] = np.maximum(normal, 0.0)
+        return normal
+
+    def update(self, u: np.ndarray, reaction: np.ndarray, advance_m: float, tolerance_m: float,
+               left_tolerance_m: float | None = None) -> bool:
+        """One round of the active-set rules (module docstring); True if the set changed.
+
+        ``u`` the displacement just solved (m), ``reaction`` the constraint forces on the
+        nodes (N, (n, 3)); the contacts' normal reactions are kept in ``pressure``. A free
+        node touches when it is ``tolerance_m`` behind a surface, one released in this step
+        (``left``, cleared by the caller at a step's start) ``left_tolerance_m``.
         """
         changed_set = False
         contact = np.flatnonzero(self.body >= 0)
         if len(contact):
-            frames = self.frames_of(contact)
-            normal = np.einsum("nk,nk->n", reaction[contact], frames[:, 0])
+            normal = self.record_pressure(reaction)
             scale = max(np.abs(reaction).max(), 1e-300)
-            tangential = reaction[contact] - normal[:, None] * frames[:, 0]
-            mu = self.friction[self.body[contact]]
-            self.pressure[contact] = np.maximum(normal, 0.0)
-            held = self.bonded[self.body[contact]]
-            pulling = (normal < -1e-9 * scale) & ~held
+            fresh = self.fresh[contact]
+            pulling = (normal < -1e-9 * scale) & ~self.bonded[self.body[contact]] & ~fresh
+            if fresh.any():
+                self.fresh[contact] = False
+                changed_set = True
             if pulling.any():
                 self.release(contact[pulling])
+                self.left[contact[pulling]] = True
                 changed_set = True
-            stick = (self.status[contact] == STICK) & ~pulling & ~held
-            t_size = np.linalg.norm(tangential, axis=1)
-            slides = stick & (t_size > mu * np.maximum(normal, 0.0) * (1 + 1e-6) + 1e-12 * scale)
-            if slides.any():
-                nodes = contact[slides]
-                self.status[nodes] = SLIP
-                self.direction[nodes] = tangential[slides] / t_size[slides, None]
-                self.version += 1
-                changed_set = True
-            slip = (self.status[contact] == SLIP) & ~pulling & ~slides & (mu > 0)
-            if restick and slip.any():
-                nodes = contact[slip]
-                moved = u[nodes] - u_start[nodes]
-                moved -= np.einsum("nk,nk->n", moved, frames[slip, 0])[:, None] * frames[slip, 0]
-                back = np.einsum("nk,nk->n", moved, self.direction[nodes]) > tolerance_m
-                if back.any():  # moving along the friction force: it sticks where it is
-                    self.status[nodes[back]] = STICK
-                    self.anchor[nodes[back]] = u[nodes[back]]
-                    self.version += 1
-                    changed_set = True
         gap, which = self.gaps(u, advance_m)
-        crossing = np.flatnonzero((self.body < 0) & (which >= 0) & (gap < -tolerance_m))
+        gate = np.where(self.left, tolerance_m if left_tolerance_m is None else left_tolerance_m, tolerance_m)
+        crossing = np.flatnonzero((self.body < 0) & (which >= 0) & (gap < -gate))
         if len(crossing):
             self.touch(crossing, which[crossing], u)
             changed_set = True
         return changed_set
 
 
-__all__ = ["Plane", "Punch", "ContactSet", "FREE", "STICK", "SLIP"]
+__all__ = ["Plane", "Punch", "ContactSet", "FrictionLinearised", "friction_force", "friction_linearised",
+           "FREE", "STICK", "SLIP"]

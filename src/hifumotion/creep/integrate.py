@@ -14,7 +14,10 @@ is taken by **backward Euler** with the displacement at the end of the step unkn
 step, as the explicit path's implicit viscosity), ``M`` the lumped real mass (no mass
 scaling: it only keeps a frictionless body's rigid modes well posed). Contacts are
 constraints (:mod:`.contact`), eliminated from the system: each step solves the
-symmetric positive-definite reduced system once per round of the active-set rules.
+symmetric positive-definite reduced system once per round. A round also linearises the
+friction (Coulomb's with an elastic stick, :mod:`.contact`) at the last round's motion —
+its tangent where a contact slides — and the rounds end when the contact set holds and
+the law holds to ``friction_rtol`` of each contact's μ_f λ_n.
 
 Steps adapt to the motion: the local error of backward Euler, ``½ Δt |u̇₊ − u̇|``, is
 held near ``tolerance`` × Δx by doubling or halving the step (a ladder of sizes, so the
@@ -37,13 +40,15 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from hifumotion.creep.contact import SLIP, STICK, ContactSet, Plane, Punch
+from hifumotion.creep.contact import SLIP, STICK, ContactSet, FrictionLinearised, Plane, Punch, friction_linearised
 from hifumotion.creep.hexahedra import MeshMatrices, _positions
 from hifumotion.creep.linear import Factor, FactorError, preconditioned_cg, refined_solve
 from hifumotion.creep.voxels import VoxelMesh
 from hifumotion.errors import InputError
 
 MM = 1e-3
+#: how far (spacings) a node released within a step must cross a surface to touch again in it
+LEFT_TOLERANCE = 2e-3
 #: Settling steps (s): from a millisecond, where inertia dominates a 1 mm voxel's stiffness,
 #: to static equilibrium (M/Δt² below 10⁻⁸ of K).
 SETTLE_STEPS_S = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 1e3)
@@ -99,12 +104,22 @@ class CreepSettings:
     contact_tolerance
         A free node closer than this many spacings *behind* a surface is put in contact.
     max_rounds
-        Rounds of the active-set rules per step.
+        Rounds of the active-set rules and the friction's linearisation per step.
     cg_iterations, cg_rtol
-        Conjugate-gradient budget before a fresh factorisation, and its relative residual.
+        Conjugate-gradient budget before a fresh factorisation, and the relative residual of
+        a step's solution.
+    round_rtol
+        The relative residual of a round's solution (the rounds only decide the contact set
+        and the friction's linearisation; the last one is solved on to ``cg_rtol``).
     friction_rtol
-        A step's rounds end when no contact changed and the slipping contacts' normal
-        reactions (which set their friction, μ_f λ_n) moved by less than this, relatively.
+        A step's rounds end when no contact changed and every contact's friction, at its
+        new normal reaction, is the linearised one to this fraction of μ_f λ_n.
+    stick_mm
+        The elastic stick's reach ε (mm): a contact sticks up to this tangential
+        displacement from its anchor and slides beyond it (the FE reference's).
+    newton_rounds
+        Rounds that linearise the friction by its tangent (Newton); later ones take the
+        secant, which always settles.
     solver
         ``"pardiso"``, ``"superlu"`` or None (the best installed).
     precision
@@ -119,7 +134,10 @@ class CreepSettings:
     max_rounds: int = 30
     cg_iterations: int = 12
     cg_rtol: float = 1e-9
+    round_rtol: float = 1e-6
     friction_rtol: float = 1e-3
+    stick_mm: float = 1e-3
+    newton_rounds: int = 8
     solver: str | None = None
     precision: str = "mixed"
 
@@ -207,7 +225,7 @@ class CreepSolver:
         sparsity pattern (its ordering and symbolic factorisation are made once): node i's
         three ``q`` are its displacement along the axes (free) or along its contact's frame
         (normal, two tangents), and a last one is the bar's advance s when there is a bar.
-        A constrained unknown (a contact's normal, a stuck contact's tangents) has a zero
+        A constrained unknown (a contact's normal, a bonded contact's tangents) has a zero
         column in T — its value is in ``g``, or in the s column for the bar's contacts — and
         an identity row in the reduced system. Returns (T, g, s's column or −1, constrained)."""
         key = self.contacts.version
@@ -228,7 +246,7 @@ class CreepSolver:
             frames = cs.frames_of(contact)
             const, coef = cs.prescribed_normal(contact)
             g[contact] += const[:, None] * frames[:, 0]
-            stick = cs.status[contact] == STICK
+            stick = cs.status[contact] == STICK   # bonded: held rigidly
             held = np.einsum("nk,nak->na", cs.anchor[contact], frames[:, 1:])
             g[contact[stick]] += np.einsum("na,nak->nk", held[stick], frames[stick, 1:])
             constrained += [3 * contact[stick] + 1, 3 * contact[stick] + 2]
@@ -266,11 +284,19 @@ class CreepSolver:
         rows = np.repeat(np.arange(ones.shape[0]), np.diff(ones.indptr))
         self._pattern_diag = np.flatnonzero(rows == ones.indices)
 
-    def _solve(self, a: sp.csr_matrix, rhs: np.ndarray, force_n: float, guess: np.ndarray | None):
+    def _solve(self, a: sp.csr_matrix, rhs: np.ndarray, force_n: float, guess: np.ndarray | None,
+               friction: FrictionLinearised | None = None, rtol: float | None = None):
+        """The step's displacement (m, flat) and the bar's advance for one round's contact set
+        and friction (its force −(c + S (q_t − anchor)) on the contacts' tangential unknowns q_t),
+        to a relative residual ``rtol`` (default ``cg_rtol``; the system is kept for :meth:`_polish`)."""
+        rtol = self.settings.cg_rtol if rtol is None else rtol
         t, g, s_col, constrained = self._reduction()   # s_col −1: no bar, or one touching nothing
         rhs_q = t.T @ (rhs - a @ g)
         if s_col >= 0:
             rhs_q[s_col] += force_n
+        if friction is not None and len(friction.nodes):
+            tangents = 3 * friction.nodes[:, None] + np.array([1, 2])
+            rhs_q[tangents] += np.einsum("nab,nb->na", friction.stiffness_n_m, friction.anchor_t) - friction.constant_n
         rhs_q[constrained] = 0.0
         self.stats["solves"] += 1
         # the guess in reduced unknowns: T's columns are orthonormal but the bar's advance's
@@ -282,21 +308,31 @@ class CreepSolver:
         # the last factorisation preconditions any later matrix (the same unknowns, the same
         # pattern): a new μ or Δt changes values, a contact set a few nodes apart a few rows.
         # A fresh factorisation only when conjugate gradients need more than their budget.
-        reduced = self._reduced(a, t)
+        reduced = self._with_friction(self._reduced(a, t), friction)
         if self._factor is not None and x0 is not None:
             def apply(q):
                 return reduced @ q
-            q, its, ok = preconditioned_cg(apply, rhs_q, self._factor, x0, self.settings.cg_rtol,
-                                           self.settings.cg_iterations)
+            q, its, ok = preconditioned_cg(apply, rhs_q, self._factor, x0, rtol, self.settings.cg_iterations)
             self.stats["cg_iterations"] += its
-            if ok:
-                return t @ q + g, (q[s_col] if s_col >= 0 else None)
-        q = self._factorise(reduced, rhs_q)
+        if self._factor is None or x0 is None or not ok:
+            q = self._factorise(reduced, rhs_q, rtol)
+        self._system = (reduced, rhs_q, q, t, g, s_col, rtol)
         return t @ q + g, (q[s_col] if s_col >= 0 else None)
 
-    def _factorise(self, reduced: sp.csr_matrix, rhs_q: np.ndarray) -> np.ndarray:
+    def _polish(self) -> tuple[np.ndarray, float | None]:
+        """The last round's system solved on to ``cg_rtol`` from its round's solution."""
+        reduced, rhs_q, q, t, g, s_col, rtol = self._system
+        if rtol > self.settings.cg_rtol:
+            q, its, ok = preconditioned_cg(lambda x: reduced @ x, rhs_q, self._factor, q, self.settings.cg_rtol,
+                                           self.settings.cg_iterations)
+            self.stats["cg_iterations"] += its
+            if not ok:
+                q = self._factorise(reduced, rhs_q, self.settings.cg_rtol)
+        return t @ q + g, (q[s_col] if s_col >= 0 else None)
+
+    def _factorise(self, reduced: sp.csr_matrix, rhs_q: np.ndarray, rtol: float) -> np.ndarray:
         """A fresh factorisation of ``reduced`` (in the last one's place: the analysis is kept on
-        the same pattern) and the solution of ``rhs_q`` to ``cg_rtol``."""
+        the same pattern) and the solution of ``rhs_q`` to a relative residual ``rtol``."""
         precision = self.settings.precision
         for attempt in (precision, "double"):
             if self._factor is None:
@@ -305,8 +341,7 @@ class CreepSolver:
                 self._factor.refactor(reduced, attempt)
             self.stats["factorisations"] += 1
             try:
-                q, its = refined_solve(reduced, self._factor, rhs_q, self.settings.cg_rtol,
-                                       self.settings.cg_iterations)
+                q, its = refined_solve(reduced, self._factor, rhs_q, rtol, self.settings.cg_iterations)
                 self.stats["cg_iterations"] += its
                 return q
             except FactorError:
@@ -337,6 +372,40 @@ class CreepSolver:
             self._reduced_of = a  # holds ``a`` alive, so its id is not reused while cached
         return self._reduced_matrix
 
+    def _with_friction(self, reduced: sp.csr_matrix, friction: FrictionLinearised | None) -> sp.csr_matrix:
+        """``reduced`` plus the friction's stiffness S on each contact's two tangential unknowns
+        (inside their node's block of the fixed pattern)."""
+        if friction is None or len(friction.nodes) == 0:
+            return reduced
+        indptr, indices = self._pattern
+        tangents = 3 * friction.nodes[:, None] + np.array([1, 2])
+        rows = np.repeat(tangents, 2, axis=1).ravel()
+        cols = np.tile(tangents, (1, 2)).ravel()
+        data = reduced.data.copy()
+        data[_positions(indptr, indices, rows, cols)] += friction.stiffness_n_m.ravel()
+        return sp.csr_matrix((data, indices, indptr), shape=reduced.shape)
+
+    def _friction(self, u: np.ndarray, round_: int) -> FrictionLinearised:
+        """The frictional contacts' law linearised at ``u`` (m, (n, 3)), at their last normal reactions."""
+        cs = self.contacts
+        nodes = cs.frictional()
+        anchor_t = cs.tangential(nodes, cs.anchor)
+        limit = cs.friction[cs.body[nodes]] * cs.pressure[nodes]
+        return friction_linearised(nodes, anchor_t, cs.tangential(nodes, u) - anchor_t, limit,
+                                   self.settings.stick_mm * MM, newton=round_ < self.settings.newton_rounds)
+
+    def _friction_settled(self, friction: FrictionLinearised, u: np.ndarray) -> bool:
+        """Whether the round's linearised friction is the law at its solution and new normal reactions."""
+        cs = self.contacts
+        if len(friction.nodes) == 0:
+            return True
+        if np.any(cs.body[friction.nodes] < 0):
+            return False   # a contact left: the next round's set differs anyway
+        limit = cs.friction[cs.body[friction.nodes]] * cs.pressure[friction.nodes]
+        d = cs.tangential(friction.nodes, u) - friction.anchor_t
+        error = friction.error_n(d, limit, self.settings.stick_mm * MM)
+        return bool(np.all(error <= self.settings.friction_rtol * (limit + limit.mean()) + 1e-300))
+
     # -- one step ---------------------------------------------------------------------
     def _engage_punch(self, u: np.ndarray, force_n: float) -> None:
         """A pushed bar with nothing under it advances until it touches (quasi-static)."""
@@ -352,6 +421,10 @@ class CreepSolver:
         # every node the face reaches together (a flat top meets it all at once)
         first = under[gap[under] <= reach + self.settings.contact_tolerance * self.dx_m]
         cs.touch(first, np.full(len(first), cs.punch_index), u)
+        # their share of the push until their reactions are known: the friction it allows holds
+        # them from the first round (without it a body touched at a few points swings out of
+        # place, and the next rounds' friction, lagging the normal reactions, does not bring it back)
+        cs.pressure[first] = force_n / len(first)
 
     def _follow(self, u: np.ndarray) -> None:
         """An unloaded bar's face onto the nearest tissue under it (its advance, m); kept if none is."""
@@ -376,35 +449,36 @@ class CreepSolver:
         self._engage_punch(u, force)
         guess = (u + dt * v).ravel()
         cs = self.contacts
+        cs.left[:] = False
         tol = self.settings.contact_tolerance * self.dx_m
         for round_ in range(self.settings.max_rounds):
             self.stats["rounds"] += 1
-            rhs = base.copy()
-            slip = np.flatnonzero(cs.status == SLIP)
-            if len(slip):
-                mu_f = cs.friction[cs.body[slip]]
-                friction = (mu_f * cs.pressure[slip])[:, None] * cs.direction[slip]
-                rhs.reshape(-1, 3)[slip] += friction
-            new, s = self._solve(a, rhs, force, guess)
+            friction = self._friction(guess.reshape(-1, 3), round_)
+            new, s = self._solve(a, base, force, guess, friction, self.settings.round_rtol)
             if s is not None:
                 self.advance_m = float(s)
             if unloaded:
                 self._follow(new.reshape(-1, 3))
-            reaction = (a @ new - rhs).reshape(-1, 3)
+            # the constraints' reactions: their normal parts set the friction's μ_f λ_n
+            reaction = (a @ new - base).reshape(-1, 3)
             unew = new.reshape(-1, 3)
-            old_pressure = cs.pressure[slip].copy()
-            changed = cs.update(unew, u, reaction, self.advance_m, tol, restick=round_ == 0)
+            changed = cs.update(unew, reaction, self.advance_m, tol, LEFT_TOLERANCE * self.dx_m)
             if self.punch is not None and force > 0 and not np.any(cs.body == cs.punch_index):
                 self._engage_punch(unew, force)
                 changed = True
-            settled_friction = (len(slip) == 0 or np.allclose(cs.pressure[slip], old_pressure,
-                                                                rtol=self.settings.friction_rtol,
-                                                                atol=1e-12 * max(force, 1e-30)))
             guess = new
-            if not changed and settled_friction:
+            if not changed and self._friction_settled(friction, unew):
                 break
             if not changed:
                 self.stats["friction_rounds"] += 1
+        new, s = self._polish()
+        unew = new.reshape(-1, 3)
+        if s is not None:
+            self.advance_m = float(s)
+        if unloaded:
+            self._follow(unew)
+        cs.record_pressure((a @ new - base).reshape(-1, 3))
+        cs.slide(unew, self.settings.stick_mm * MM)
         gap, which = cs.gaps(unew, self.advance_m)
         touching = cs.body >= 0
         worst = float(np.max(-gap[~touching], initial=0.0)) / MM
@@ -422,7 +496,7 @@ class CreepSolver:
         n = len(self.rest_m)
         st = self.settings
         cs = self.contacts
-        # resting: the nodes on a surface start stuck to it
+        # resting: the nodes on a surface start touching it, anchored where they are
         gap, which = cs.gaps(np.zeros((n, 3)), 0.0)
         resting = np.flatnonzero((which >= 0) & (which < cs.punch_index) & (gap <= st.contact_tolerance * self.dx_m))
         cs.touch(resting, which[resting], np.zeros((n, 3)))
@@ -458,7 +532,7 @@ class CreepSolver:
             mu = self.material.viscosity(rate)
             adv0 = self.advance_m
             version0 = cs.version
-            state = (cs.body.copy(), cs.status.copy(), cs.anchor.copy(), cs.direction.copy(), cs.pressure.copy())
+            state = (cs.body.copy(), cs.status.copy(), cs.anchor.copy(), cs.pressure.copy(), cs.fresh.copy())
             unew, taken = self.step(u, v, t + dt, dt, mu)
             vnew = (unew - u) / dt
             err = 0.5 * dt * np.abs(vnew - v).max()
@@ -466,7 +540,7 @@ class CreepSolver:
                 # reject: restore the contact state and halve
                 self.stats["rejected"] += 1
                 changed = cs.version != version0
-                cs.body, cs.status, cs.anchor, cs.direction, cs.pressure = state
+                cs.body, cs.status, cs.anchor, cs.pressure, cs.fresh = state
                 if changed:  # the set the factorisation knew is gone
                     cs.version += 1
                 self.advance_m = adv0

@@ -1,0 +1,96 @@
+"""The fitted model against a twin's truth at the truth's own parameters (issue 19).
+
+Runs the paper-resolution model (the fast path, ``integrator = "implicit"``) of a twin's
+observation with the parameters the twin was made with, and compares the displacement
+of the model's points A (frame 0's contour, in the image plane) with the truth's — the
+finite-element trajectory in ``truth/tissue_trajectory.npz``, interpolated at the same
+points. What it measures is the model's own error (discretisation, reconstructed shape,
+contact law), the floor under any fit: a calibration cannot do better than this on the
+frames it fits without absorbing the error into wrong parameters.
+
+Prints JSON: the run's time and solver counts, and every ``--every`` frames the RMS
+displacement error and the truth's RMS displacement (µm). Run it alone (2 cores)::
+
+    python benchmarks/bench_forward_truth.py .bench/twins/push_release_s43-*/ --last 190
+    python benchmarks/bench_forward_truth.py TWIN --set '{"stick_mm": 0.01}'   # CreepSettings fields
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def main() -> None:
+    from bench_estimation import observe
+
+    from hifumotion.creep import integrate
+    from hifumotion.creep.linear import set_threads
+    from hifumotion.estimation.model import ModelSettings, Parameters, model_spec, run_model
+    from hifumotion.particles.section import displacement_at
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("twin", type=Path, help="a twin folder (observed/ and truth/)")
+    ap.add_argument("--last", type=int, default=190, help="last frame to run")
+    ap.add_argument("--particles", type=int, default=4399)
+    ap.add_argument("--every", type=int, default=10, help="report every n-th frame")
+    ap.add_argument("--set", default="{}", help="CreepSettings fields as JSON, e.g. '{\"friction_rtol\": 0.01}'")
+    args = ap.parse_args()
+    changes = json.loads(args.set)
+    unknown = set(changes) - set(integrate.CreepSettings.__dataclass_fields__)
+    if unknown:
+        sys.exit(f"--set: not CreepSettings fields: {sorted(unknown)}")
+    set_threads(1)   # as the calibration's workers run
+
+    # the settings reach the solver through the scene; patch the defaults for this process only
+    defaults = integrate.CreepSettings.__init__
+    stats: dict = {}
+
+    def settings_init(self, *a, **k):
+        defaults(self, *a, **k)
+        for name, value in changes.items():
+            setattr(self, name, value)
+
+    run = integrate.CreepSolver.run
+
+    def counted_run(self, *a, **k):
+        result = run(self, *a, **k)
+        stats.update(result.stats)
+        return result
+
+    integrate.CreepSettings.__init__ = settings_init
+    integrate.CreepSolver.run = counted_run
+
+    observed, obs, *_ = observe(args.twin, "expert", "speckle", 0.0)
+    p = json.loads((args.twin / "truth" / "parameters.json").read_text())
+    k = Parameters(p["external_force_n"], p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"])
+    spec = model_spec(obs, ModelSettings(tissue_particles=args.particles))
+    t0 = time.perf_counter()
+    model = run_model(spec, k, args.last)
+    seconds = time.perf_counter() - t0
+
+    truth = np.load(args.twin / "truth" / "tissue_trajectory.npz")
+    positions, dx = truth["positions_mm"].astype(float), float(truth["spacing_mm"])
+    a0 = model.points_mm[0]
+    frames = list(range(0, min(len(model.points_mm), len(positions)), args.every))
+    error, size = [], []
+    for f in frames:
+        u_true, _ = displacement_at(a0, positions[f], positions[0], dx)
+        u_model = model.points_mm[f] - a0
+        error.append(float(np.sqrt(((u_model - u_true) ** 2).sum(1).mean()) * 1000))
+        size.append(float(np.sqrt((u_true ** 2).sum(1).mean()) * 1000))
+    print(json.dumps({"twin": str(args.twin), "settings": changes, "seconds": round(seconds, 2),
+                      "stats": {n: (round(v, 4) if isinstance(v, float) else v) for n, v in stats.items()},
+                      "frames": frames, "rms_error_um": np.round(error, 1).tolist(),
+                      "truth_rms_displacement_um": np.round(size, 1).tolist()}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
