@@ -7,8 +7,8 @@ it meets Coulomb's friction with an elastic stick (the FE reference's law,
 
     f = μ_f λ_n d / max(|d|, ε),
 
-``d`` the node's tangential displacement from its anchor and ε the stick's reach, a
-micrometre — a contact sticks elastically up to ε and slides beyond it at μ_f λ_n, its
+``d`` the node's tangential displacement from its anchor and ε the stick's reach
+(``CreepSettings.stick_mm``) — a contact sticks elastically up to ε and slides beyond it at μ_f λ_n, its
 anchor dragged along to ε (:meth:`ContactSet.slide`). Unlike the rigid stick/slip
 switch the law is continuous, so the motion is a continuous function of the load and
 the parameters (a release does not hang on which node switches first).
