@@ -53,7 +53,6 @@ class FrictionLinearised:
 
     nodes: np.ndarray          # (m,) node indices
     anchor_t: np.ndarray       # (m, 2) the anchors in the tangents (m)
-    limit_n: np.ndarray        # (m,) μ_f λ_n (N): the largest friction force
     constant_n: np.ndarray     # (m, 2) c (N)
     stiffness_n_m: np.ndarray  # (m, 2, 2) S (N/m)
 
@@ -79,17 +78,14 @@ def friction_linearised(nodes: np.ndarray, anchor_t: np.ndarray, d0_m: np.ndarra
     fixed, only its direction turns); otherwise the secant S = μ_f λ_n/|d0| I, c = 0, whose
     rounds always settle (iteratively reweighted, as the FE reference's) but only linearly."""
     size = np.linalg.norm(d0_m, axis=1)
-    reach = np.maximum(size, eps_m)
-    eye = np.eye(2)
-    stiffness = (limit_n / reach)[:, None, None] * np.broadcast_to(eye, (len(size), 2, 2))
+    stiffness = (limit_n / np.maximum(size, eps_m))[:, None, None] * np.eye(2)
     constant = np.zeros_like(d0_m)
     if newton:
         beyond = size > eps_m
         unit = d0_m[beyond] / size[beyond, None]
-        stiffness = stiffness.copy()
         stiffness[beyond] -= (limit_n[beyond] / size[beyond])[:, None, None] * np.einsum("na,nb->nab", unit, unit)
         constant[beyond] = limit_n[beyond, None] * unit
-    return FrictionLinearised(nodes, anchor_t, limit_n, constant, stiffness)
+    return FrictionLinearised(nodes, anchor_t, constant, stiffness)
 
 
 @dataclass(frozen=True)
@@ -232,6 +228,10 @@ class ContactSet:
         contact = np.flatnonzero(self.status == SLIP)
         return contact[self.friction[self.body[contact]] > 0]
 
+    def friction_limit(self, nodes: np.ndarray) -> np.ndarray:
+        """μ_f λ_n (N) of ``nodes`` at their last normal reactions: the largest friction they take."""
+        return self.friction[self.body[nodes]] * self.pressure[nodes]
+
     def tangential(self, nodes: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``nodes``' displacement (m) in their contact frames' tangents, ``(m, 2)``."""
         return np.einsum("nk,nak->na", u[nodes], self.frames_of(nodes)[:, 1:])
@@ -257,7 +257,7 @@ class ContactSet:
         return normal
 
     def update(self, u: np.ndarray, reaction: np.ndarray, advance_m: float, tolerance_m: float,
-               left_tolerance_m: float | None = None) -> bool:
+               left_tolerance_m: float) -> bool:
         """One round of the active-set rules (module docstring); True if the set changed.
 
         ``u`` the displacement just solved (m), ``reaction`` the constraint forces on the
@@ -280,7 +280,7 @@ class ContactSet:
                 self.left[contact[pulling]] = True
                 changed_set = True
         gap, which = self.gaps(u, advance_m)
-        gate = np.where(self.left, tolerance_m if left_tolerance_m is None else left_tolerance_m, tolerance_m)
+        gate = np.where(self.left, left_tolerance_m, tolerance_m)
         crossing = np.flatnonzero((self.body < 0) & (which >= 0) & (gap < -gate))
         if len(crossing):
             self.touch(crossing, which[crossing], u)

@@ -392,8 +392,7 @@ class CreepSolver:
         cs = self.contacts
         nodes = cs.frictional()
         anchor_t = cs.tangential(nodes, cs.anchor)
-        limit = cs.friction[cs.body[nodes]] * cs.pressure[nodes]
-        return friction_linearised(nodes, anchor_t, cs.tangential(nodes, u) - anchor_t, limit,
+        return friction_linearised(nodes, anchor_t, cs.tangential(nodes, u) - anchor_t, cs.friction_limit(nodes),
                                    self.settings.stick_mm * MM, newton=round_ < self.settings.newton_rounds)
 
     def _friction_settled(self, friction: FrictionLinearised, u: np.ndarray) -> bool:
@@ -403,7 +402,7 @@ class CreepSolver:
             return True
         if np.any(cs.body[friction.nodes] < 0):
             return False   # a contact left: the next round's set differs anyway
-        limit = cs.friction[cs.body[friction.nodes]] * cs.pressure[friction.nodes]
+        limit = cs.friction_limit(friction.nodes)
         d = cs.tangential(friction.nodes, u) - friction.anchor_t
         error = friction.error_n(d, limit, self.settings.stick_mm * MM)
         return bool(np.all(error <= self.settings.friction_rtol * (limit + limit.mean()) + 1e-300))
