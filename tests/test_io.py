@@ -315,3 +315,20 @@ def test_output_folder_never_clobbers(tmp_path):
         (out / "run_info.json").write_text("{}")
     assert (target / "result.txt").read_text() == "second"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging folder left behind
+
+
+def test_output_path_through_a_missing_folder_is_checked_where_it_resolves(tmp_path):
+    # "missing/../notes.txt" does not exist as typed, but the run would land on notes.txt
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    with pytest.raises(InputError, match="not a folder"):
+        with output_folder(tmp_path / "missing" / ".." / "notes.txt"):
+            pass
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "data.csv").write_text("mine")
+    with pytest.raises(OutputExistsError):
+        with output_folder(tmp_path / "missing" / ".." / "kept"):
+            pass
+    assert notes.read_text() == "mine" and (kept / "data.csv").read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept", "notes.txt"]

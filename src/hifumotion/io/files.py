@@ -81,11 +81,13 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
     folder hifumotion wrote (it holds ``run_info.json``) that is not the working folder or an
     ancestor of it and holds none of the run's ``inputs``."""
     folder = Path(path)
+    # what is checked is what will be written: the resolved path (``missing/../file`` does not
+    # exist as typed, but resolves onto ``file``)
     final = folder.resolve()
-    if folder.exists() or folder.is_symlink():
-        if not folder.is_dir():
+    if final.exists() or folder.is_symlink():
+        if not final.is_dir():
             raise InputError("exists and is not a folder; choose another output folder", folder)
-        if any(folder.iterdir()):
+        if any(final.iterdir()):
             if not overwrite:
                 raise OutputExistsError(f"{folder}: output folder exists and is not empty; choose a new one or pass "
                                         "--overwrite")
@@ -97,7 +99,7 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
                 if item is not None and _is_within(Path(item).resolve(), final):
                     raise InputError(f"holds {item}, an input of this run; --overwrite never replaces it — choose "
                                      "another output folder", folder)
-            if not (folder / RUN_INFO).is_file():
+            if not (final / RUN_INFO).is_file():
                 raise InputError(f"was not written by hifumotion (it has no {RUN_INFO}); --overwrite only replaces "
                                  "hifumotion's own output folders — choose a new one", folder)
     return folder
