@@ -111,7 +111,7 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
                   observed.frame_interval_s, horizons, now)
     window_s = (valid[-1] - valid[0]) * observed.frame_interval_s
     return {
-        "calibration_s": cal_s, "calibration_timings_s": cal.timings_s, "runs": cal.runs,
+        "calibration_s": cal_s, "calibration_timings_s": cal.timings_s, "runs": cal.runs, "objective": cal.objective,
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
         "degeneracy": cal.degeneracy, "space_mapping": cal.mapped,
         "physics": ev.physics, "baselines_validation": ev.baselines, "online": ev.online,

@@ -16,7 +16,7 @@ from hifumotion.estimation.model import Parameters
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
 from hifumotion.estimation.protocol import default_frames, parse_frames
 from hifumotion.estimation.space import SearchSpace
-from hifumotion.particles.section import Plane, displacement_at, plane_displacement
+from hifumotion.particles.section import Plane, displacement_at, material_displacement, plane_displacement
 from hifumotion.prediction.physics import ReferenceShape, predicted_mask
 
 PLANE = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (120, 140), 0.2)
@@ -71,6 +71,56 @@ def test_displacement_is_exact_for_an_affine_motion():
     # Shepard weights reproduce constants exactly; a linear field to the weights' centring error
     expected = q @ a.T + np.array([0.3, -0.2, 0.1])
     assert np.allclose(u, expected, atol=0.02)
+
+
+def test_material_points_follow_an_affine_motion_exactly_at_a_surface():
+    """Linear moving least squares: exact for an affine motion, also at a corner of the cloud
+    where the neighbours lie on one side (Shepard's weights are off there by their centring)."""
+    g = np.stack(np.meshgrid(*[np.arange(0, 10.0, 1.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    a = np.array([[0.02, 0.01, 0.0], [-0.01, 0.03, 0.05], [0.0, 0.0, -0.02]])
+    shift = np.array([0.3, -0.2, 0.1])
+    moved = g + g @ a.T + shift
+    q = np.array([[4.3, 5.1, 4.9], [0.2, 9.0, 4.4], [9.0, 9.0, 9.0], [0.0, 0.3, 0.0]])
+    u, covered = material_displacement(q, moved, g, 1.0)
+    assert covered.all()
+    np.testing.assert_allclose(u, q @ a.T + shift, atol=1e-9)
+    frames = np.stack([g, moved, g + 2.0 * (moved - g)])          # (F, N, 3) at once
+    uf, _ = material_displacement(q, frames, g, 1.0)
+    np.testing.assert_allclose(uf[2], 2.0 * (q @ a.T + shift), atol=1e-9)
+    far, covered_far = material_displacement(np.array([[30.0, 0.0, 0.0]]), moved, g, 1.0)
+    assert not covered_far[0] and np.all(far == 0.0)
+
+
+def test_material_points_under_an_indent_deeper_than_the_support_follow_it():
+    """A top surface pushed 3 mm down by a smooth dent (3 spacings, beyond the 2-spacing support):
+    the points on it follow the dent's known displacement, not the material now near where
+    they were."""
+    g = np.stack(np.meshgrid(np.arange(0, 21.0), np.arange(0, 11.0), np.arange(0, 11.0), indexing="ij"),
+                 -1).reshape(-1, 3)
+
+    def dent(x):   # mm: down by 3 at the top centre, fading with depth and across (σ 5 mm)
+        r2 = (x[:, 0] - 10.0) ** 2 + (x[:, 2] - 5.0) ** 2
+        return np.stack([0 * r2, -3.0 * np.exp(-r2 / 50.0) * (x[:, 1] / 10.0) ** 2, 0 * r2], 1)
+
+    moved = g + dent(g)
+    top = np.stack([np.linspace(6.0, 14.0, 9), np.full(9, 10.0), np.full(9, 5.0)], 1)
+    u, covered = material_displacement(top, moved, g, 1.0)
+    assert covered.all()
+    # the dent's curvature over the support (≤ 0.12 /mm) is the interpolation's only error: ½ u'' h² ≲ 0.1 mm
+    np.testing.assert_allclose(u, dent(top), atol=0.1)
+
+
+def test_the_default_objective_fits_the_displacement_only_where_speckle_tracking_observed_it():
+    from types import SimpleNamespace
+
+    from hifumotion.estimation.calibrate import CalibrationSettings, objective_for
+
+    assert CalibrationSettings().objective == "auto"
+    tracked, segmented = SimpleNamespace(motion=object()), SimpleNamespace(motion=None)
+    assert objective_for("auto", tracked) == "contour+displacement"
+    assert objective_for("auto", segmented) == "contour"          # given or re-segmented contours
+    assert objective_for("contour", tracked) == "contour"          # what the user asked for stands
+    assert objective_for("contour+displacement", segmented) == "contour+displacement"   # and is refused later
 
 
 def test_predicted_section_follows_a_rigid_shift():

@@ -20,7 +20,7 @@ def calibrate(
     method: str = typer.Option("least_squares", "--method", help="least_squares (default), cmaes, or table1 (the paper's iterative algorithm)."),
     training: Optional[str] = typer.Option(None, "--training", help="Training frames: '20,30,40' or '20:101:10' (default: the paper's protocol)."),
     contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of tracking."),
-    objective: str = typer.Option("contour", "--objective", help="contour (the paper's S_t) or contour+displacement (also the speckle-tracked displacement of the contour points)."),
+    objective: str = typer.Option("auto", "--objective", help="auto (default: contour+displacement where speckle tracking observed the motion, else contour), contour (the paper's S_t) or contour+displacement (also the speckle-tracked displacement of the contour points)."),
     tracking: str = typer.Option("speckle", "--tracking", help="speckle (frame 0's contour carried by speckle tracking, default) or glcv (re-segment every frame, as the paper)."),
     force: float = typer.Option(paper.FORCE_N, "--force", callback=positive, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
     particles: int = typer.Option(paper.TISSUE_PARTICLES, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (the paper: 4,399)."),
@@ -44,8 +44,8 @@ def calibrate(
 
     if method not in ("least_squares", "cmaes", "table1"):
         raise InputError(f"expected least_squares, cmaes or table1, got {method!r}", "--method")
-    if objective not in ("contour", "contour+displacement"):
-        raise InputError(f"expected contour or contour+displacement, got {objective!r}", "--objective")
+    if objective not in ("auto", "contour", "contour+displacement"):
+        raise InputError(f"expected auto, contour or contour+displacement, got {objective!r}", "--objective")
     if tracking not in ("speckle", "glcv"):
         raise InputError(f"expected speckle or glcv, got {tracking!r}", "--tracking")
     if resume is not None:

@@ -37,6 +37,7 @@ from hifumotion.estimation.protocol import default_frames
 from hifumotion.estimation.space import NAMES, STEPS, SearchSpace
 
 Method = Literal["least_squares", "cmaes", "table1"]
+OBJECTIVES = ("auto", "contour", "contour+displacement")
 #: Largest space-mapping move per coordinate, in units of 10 finite-difference steps
 #: (ln E, ln β1 by 1.0: a factor 2.7; ν by 0.2; β2 by 1.0).
 MAX_MAPPING_STEP = 2.0
@@ -62,8 +63,9 @@ class CalibrationSettings:
     scheduler_address: str | None = None
     seed: int = 0
     # "contour": the distances of the model's points to the observed contours (the paper's S_t);
-    # "contour+displacement": also the speckle-tracked displacement of those points
-    objective: str = "contour"
+    # "contour+displacement": also the speckle-tracked displacement of those points; "auto":
+    # the displacement too where speckle tracking observed the motion (docs/decisions.md)
+    objective: str = "auto"
     # weight each contour residual by the speckle tracking's quality at the point (with speckle
     # tracking; given or GLCV-tracked contours have no such measure and keep weight 1)
     quality_weights: bool = True
@@ -91,6 +93,7 @@ class Calibration:
     runs: int
     timings_s: dict = field(default_factory=dict)
     failed_runs: int = 0            # forward runs that failed (logged, not used as data)
+    objective: str = "contour"      # what was fitted (CalibrationSettings.objective resolved)
     summary: dict | None = None     # parameters.json, once written
 
     def report(self) -> dict:
@@ -138,9 +141,10 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     search_settings = ModelSettings(**{**s.model.__dict__, "tissue_particles": min(s.search_particles,
                                                                                      s.model.tissue_particles)})
     search = model_spec(observation, search_settings)
-    if s.objective not in ("contour", "contour+displacement"):
-        raise InputError(f"unknown objective {s.objective!r}; expected contour or contour+displacement", "objective")
-    if s.objective == "contour+displacement":
+    if s.objective not in OBJECTIVES:
+        raise InputError(f"unknown objective {s.objective!r}; expected {', '.join(OBJECTIVES)}", "objective")
+    objective = objective_for(s.objective, observation)
+    if objective == "contour+displacement":
         if observation.motion is None:
             raise InputError("the displacement objective needs speckle tracking (tracking = speckle)", "objective")
         # both models carry the same points A (frame 0's contour resampled), so one set serves both
@@ -222,7 +226,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     std = {n: float(v) for n, v in zip(NAMES, unc.std)}   # inf: not seen by the data
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), fit_result, table1,
                        mapped, degeneracy, unc.correlation.round(3).tolist(), final, search, observation,
-                       ev.runs, timings, ev.failed)
+                       ev.runs, timings, ev.failed, objective)
 
 
 def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:
@@ -240,6 +244,15 @@ def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:
                    "determined": report[name]["determined"]} for name, (fit, true) in pairs.items()}
 
 
+def objective_for(asked: str, observation: Observation) -> str:
+    """The objective ``asked`` for (:data:`OBJECTIVES`) on this observation: ``"auto"`` is
+    ``contour+displacement`` where speckle tracking observed the motion, ``contour`` where
+    the contours were given or re-segmented (no tracked displacement exists)."""
+    if asked != "auto":
+        return asked
+    return "contour+displacement" if observation.motion is not None else "contour"
+
+
 def _expected_runs(s: CalibrationSettings) -> int:
     """A rough count of search runs, for the progress bar."""
     p = 4
@@ -250,4 +263,4 @@ def _expected_runs(s: CalibrationSettings) -> int:
     return 6 + s.table1_max_runs + 2 * p + 3
 
 
-__all__ = ["CalibrationSettings", "Calibration", "calibrate"]
+__all__ = ["CalibrationSettings", "Calibration", "calibrate", "objective_for", "OBJECTIVES"]

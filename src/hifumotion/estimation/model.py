@@ -14,8 +14,8 @@
 under gravity, then the push; by default on the fast path (:mod:`hifumotion.creep`:
 the reconstructed tissue as conforming voxels, contacts as constraints, backward
 Euler), ``ModelSettings.integrator = "explicit"`` for the paper's Eq. 8–20 — and returns where the points A have moved at every
-frame (their displacement since frame 0, interpolated from the tissue particles,
-:func:`~hifumotion.particles.section.displacement_at`), and, if asked, the tissue
+frame (their displacement since frame 0, interpolated from the tissue particles around
+them at frame 0, :func:`~hifumotion.particles.section.material_displacement`), and, if asked, the tissue
 particles of chosen frames.
 
 Frame 0 of the model is its settled state. Motion is measured from there, so the
@@ -212,7 +212,7 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -
     Raises :class:`~hifumotion.errors.InputError` for parameters outside the model's
     validity (ν ≥ 0.5, E ≤ 0 …).
     """
-    from hifumotion.particles.section import displacement_at
+    from hifumotion.particles.section import material_displacement
     from hifumotion.particles.simulate import simulate
 
     if not (k.youngs_modulus_pa > 0 and -1 < k.poisson_ratio < 0.5 and k.beta1 >= 0):
@@ -230,10 +230,9 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -
                          "integrator")
     rest = sim.tissue_mm[0]
     frames = np.arange(len(sim.times_s))
-    points = np.empty((len(frames), len(spec.points_mm), 3))
-    for f in frames:
-        u, covered = displacement_at(spec.points_mm, sim.tissue_mm[f], rest, spec.spacing_mm)
-        points[f] = spec.points_mm + u
+    # the points A are material points: followed with the particles near them at frame 0
+    u, _ = material_displacement(spec.points_mm, sim.tissue_mm, rest, spec.spacing_mm)
+    points = spec.points_mm + u
     kept = {int(f): sim.tissue_mm[f].copy() for f in keep_frames if 0 <= f < len(frames)}
     return ModelRun(k, frames, points, rest, kept, sim.bar_centre_mm, sim.steps, time.perf_counter() - t0)
 

@@ -16,7 +16,10 @@ material points' displacement itself, along the boundary as well as across it. T
 objective can then add, for each point a and training frame t, the in-plane difference
 ``(D̂_t(a) − D_t(a)) · q_t(a)`` (mm, both components), weighted by the tracking's quality
 ``q`` at a (0 where the point was occluded): the paper's S_t with the tangential part
-that a contour alone cannot give (:meth:`TrainingData.with_displacement`).
+that a contour alone cannot give (:meth:`TrainingData.with_displacement`). Since the model's
+points A follow the material (:func:`~hifumotion.particles.section.material_displacement`),
+as the tracked ones do, this is the default wherever speckle tracking observed the motion
+(``CalibrationSettings.objective = "auto"``; docs/decisions.md, "Issue 19, seventh part").
 
 The contour residuals themselves can be weighted by the same quality
 (:meth:`TrainingData.with_contour_weights`, ``quality_weights``; on by default since the

@@ -98,6 +98,7 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
                   "search_spacing_mm": cal.search_spec.spacing_mm},
         "fit": {
             "method": cal.search.method if cal.search is not None else "table1",
+            "objective": cal.objective,
             "cost_mm": cal.search.cost_mm if cal.search is not None else float(cal.table1.frame_sums_mm.sum()),
             "S_t_mm": (np.abs(cal.search.residuals_mm).sum(1).round(3).tolist() if cal.search is not None
                        else cal.table1.frame_sums_mm.round(3).tolist()),

@@ -151,10 +151,13 @@ def section(positions_mm: np.ndarray, volumes_mm3: np.ndarray, spacing_mm: float
 
 def displacement_at(points_mm: np.ndarray, positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float,
                     smoothing_factor: float = 2.0, neighbours: int = 32) -> tuple[np.ndarray, np.ndarray]:
-    """The particles' displacement ``u = x − X`` (mm) at arbitrary points, and where it is known.
+    """The particles' displacement ``u = x − X`` (mm) at points fixed in space, and where it is known.
 
-    Shepard interpolation with cubic-kernel weights of support ``smoothing_factor ×
-    spacing_mm`` around each point; exact for rigid motions and uniform strains. Returns
+    Shepard interpolation over the particles *now* within ``smoothing_factor × spacing_mm``
+    of each point (cubic-kernel weights): the displacement of the material that is at the
+    point now — the inverse map :func:`mapped_section` and a predicted mask need. Exact for
+    translations, for an affine motion to the weights' centring error. For where given
+    material points went, :func:`material_displacement`. Returns
     ``u`` ``(P, 3)`` and ``covered`` ``(P,)`` (a particle lies within the support; ``u``
     is 0 elsewhere).
     """
@@ -183,6 +186,70 @@ def displacement_at(points_mm: np.ndarray, positions_mm: np.ndarray, rest_mm: np
     safe = np.where(found, idx, 0)
     u[covered] = (w[covered, :, None] * d_near[safe[covered]]).sum(1) / total[covered, None]
     return u, covered
+
+
+def material_weights(points_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float,
+                     smoothing_factor: float = 2.0, neighbours: int = 32):
+    """The displacement of *material* points as a linear map of the particles' displacements.
+
+    ``points_mm`` ``(P, 3)`` are material points given where they are in the configuration
+    ``rest_mm`` (a frame-0 contour on the frame-0 particles, say). Returns ``(Φ, covered)``:
+    ``Φ`` a sparse ``(P, N)`` matrix with ``u(X_p) = Σ_j Φ_pj (x_j − X_j)`` for any later
+    positions ``x``, and ``covered`` ``(P,)`` (a particle lies within the support;
+    Φ's row is 0 elsewhere).
+
+    Where :func:`displacement_at` interpolates at a point fixed in space — the inverse map a
+    mask needs — this follows the material: its neighbours and weights are taken in the rest
+    configuration, so they stay the same particles however far the tissue moves. (At a point
+    fixed in space, a surface the bar pushes 2 mm down leaves the support, and the particles
+    beside the bar, which rise, take over: the points A under the bar went up by 0.9 mm
+    while the bar advanced.) The weights are moving least squares with a linear basis
+    (cubic-kernel weights of support ``smoothing_factor × spacing_mm``): exact for any affine
+    motion, at a surface as inside — where Shepard's weights, centred on the neighbours'
+    mean, are not. A point with too few neighbours to fit a plane takes Shepard's weights.
+    """
+    import scipy.sparse as sp
+    from scipy.spatial import cKDTree
+
+    from hifumotion.particles.kernels import kernel
+
+    rest = np.asarray(rest_mm, float)
+    q = np.asarray(points_mm, float).reshape(-1, 3)
+    h = smoothing_factor * float(spacing_mm)
+    k = min(neighbours, len(rest))
+    dist, idx = cKDTree(rest).query(q, k=k, distance_upper_bound=h)
+    dist, idx = dist.reshape(len(q), -1), idx.reshape(len(q), -1)
+    found = np.isfinite(dist)
+    safe = np.where(found, idx, 0)
+    w = np.where(found, kernel(np.where(found, dist, h), h), 0.0)
+    w = w / np.maximum(w.sum(1, keepdims=True), 1e-300)     # scale-free moments
+    covered = w.sum(1) > 0
+    # linear basis p = [1, (X_j − X)/h]: Φ_j = w_j p(0)ᵀ M⁻¹ p_j with M = Σ w p pᵀ
+    basis = np.concatenate([np.ones((*safe.shape, 1)), (rest[safe] - q[:, None]) / h], axis=2)
+    moments = np.einsum("pk,pka,pkb->pab", w, basis, basis)
+    eig = np.linalg.eigvalsh(moments)
+    linear = covered & (found.sum(1) >= 4) & (eig[:, 0] > 1e-6 * eig[:, -1])
+    phi = w.copy()                                          # Shepard's where a plane cannot be fitted
+    if linear.any():
+        c = np.linalg.solve(moments[linear], np.eye(4)[0][None, :, None].repeat(linear.sum(), 0))[..., 0]
+        phi[linear] = w[linear] * np.einsum("pa,pka->pk", c, basis[linear])
+    rows = np.repeat(np.arange(len(q)), safe.shape[1])
+    matrix = sp.csr_matrix((np.where(found, phi, 0.0).ravel(), (rows, safe.ravel())), shape=(len(q), len(rest)))
+    matrix.eliminate_zeros()
+    return matrix, covered
+
+
+def material_displacement(points_mm: np.ndarray, positions_mm: np.ndarray, rest_mm: np.ndarray,
+                          spacing_mm: float, smoothing_factor: float = 2.0,
+                          neighbours: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """The displacement (mm) of the material points ``points_mm`` (given in the configuration
+    ``rest_mm``) when the particles are at ``positions_mm`` ``(N, 3)`` or ``(F, N, 3)``:
+    ``(P, 3)`` or ``(F, P, 3)``, and ``covered`` ``(P,)`` (:func:`material_weights`)."""
+    phi, covered = material_weights(points_mm, rest_mm, spacing_mm, smoothing_factor, neighbours)
+    disp = np.asarray(positions_mm, float) - np.asarray(rest_mm, float)
+    if disp.ndim == 2:
+        return phi @ disp, covered
+    return np.stack([phi @ d for d in disp]), covered
 
 
 def mapped_section(positions_mm: np.ndarray, rest_mm: np.ndarray, spacing_mm: float, plane: Plane,

@@ -49,8 +49,8 @@ class EstimationConfig(ConfigModel):
     particles: int = Field(paper.TISSUE_PARTICLES, ge=100, le=1_000_000, description="tissue particles of the fitted model (the paper: 4,399)")
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
-    objective: Literal["contour", "contour+displacement"] = Field(
-        "contour", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points")
+    objective: Literal["auto", "contour", "contour+displacement"] = Field(
+        "auto", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points; auto: the displacement too where speckle tracking observed it")
     quality_weights: bool = Field(
         True, description="weight each contour point's residual by the speckle tracking's quality there (speckle tracking only): a boundary the image does not show (under the bar's blur, on the floor) counts for little")
     bar_motion: bool = Field(
