@@ -242,3 +242,39 @@ def test_a_block_pushed_along_a_rough_floor_sticks_below_coulombs_limit_and_slid
             expected = _rigid_block_on_elastic_stick(times, force / mass, mu, g, eps_mm * MM) / MM
             np.testing.assert_allclose(r.advance_mm[1:], expected[1:], rtol=0.02)
             assert r.bar_force_n[-1] == pytest.approx(force, rel=1e-6)
+
+
+def test_the_blockwise_reduction_is_the_sparse_product():
+    """The reduced matrix built node block by node block (creep/reduce.py) against Tᵀ A T by
+    SciPy's sparse products, for free nodes, sliding contacts on a floor and a tilted bar
+    (turned frames, the bar's column) and bonded ones (zero columns)."""
+    from hifumotion.creep.contact import STICK
+
+    n = 4
+    mesh = voxel_mesh(block(n), 1.0)
+    axis = np.array([0.3, -1.0, 0.2]) / np.linalg.norm([0.3, -1.0, 0.2])
+    punch = Punch((2 * MM, 4 * MM, 2 * MM), tuple(axis), 10 * MM, lambda t: 0.1, 0.5)
+    planes = [Plane((0, 0, 0), (0, 1, 0), 0.5), Plane((0, 0, 0), (1, 0, 0), 0.5, bonded=True)]
+    solver = CreepSolver(mesh, CreepMaterial(1e4, 0.45, beta1=1e3, beta2=0.5), Surroundings(), planes, punch)
+    rest = solver.rest_m
+    cs = solver.contacts
+    zero = np.zeros_like(rest)
+    floor = np.flatnonzero(rest[:, 1] < 1e-9)
+    wall = np.flatnonzero((rest[:, 0] < 1e-9) & (rest[:, 1] > 1e-9) & (rest[:, 1] < 4 * MM - 1e-9))
+    top = np.flatnonzero(rest[:, 1] > 4 * MM - 1e-9)
+    cs.touch(floor, np.zeros(len(floor), np.int64), zero)
+    cs.touch(wall, np.ones(len(wall), np.int64), zero)
+    cs.touch(top, np.full(len(top), cs.punch_index), zero)
+    assert np.all(cs.status[wall] == STICK)
+    rate = np.random.default_rng(3).uniform(0.0, 2.0, len(mesh.elements))
+    a, _ = solver._matrices(0.05, solver.material.viscosity(rate))
+    t, _, s_col, constrained = solver._reduction()
+    assert s_col >= 0
+    got = solver._reduced(a, t).toarray()
+    expected = (t.T @ a @ t).toarray()
+    free = np.setdiff1d(np.arange(t.shape[1]), constrained)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(got[np.ix_(free, free)], expected[np.ix_(free, free)], atol=1e-12 * scale)
+    # a constrained unknown: an identity row and column, scaled to its node's diagonal
+    assert np.all(got[constrained][:, free] == 0.0) and np.all(got[free][:, constrained] == 0.0)
+    assert np.all(np.diag(got)[constrained] > 0)

@@ -43,6 +43,7 @@ import scipy.sparse as sp
 from hifumotion.creep.contact import SLIP, STICK, ContactSet, FrictionLinearised, Plane, Punch, friction_linearised
 from hifumotion.creep.hexahedra import MeshMatrices, _positions
 from hifumotion.creep.linear import Factor, FactorError, preconditioned_cg, refined_solve
+from hifumotion.creep.reduce import reduced_matrix_data
 from hifumotion.creep.voxels import VoxelMesh
 from hifumotion.errors import InputError
 
@@ -238,6 +239,10 @@ class CreepSolver:
         rows, cols, vals = [], [], []
         g = np.zeros((n, 3))
         free = np.flatnonzero(cs.body < 0)
+        # the same map per node for the blockwise reduction (:mod:`.reduce`): u_i = P_i q_i + n_i s
+        columns = np.zeros((n, 3, 3))
+        columns[free] = np.eye(3)
+        bar_normal = np.zeros((n, 3))
         rows.append((3 * free[:, None] + np.arange(3)).ravel())
         cols.append(rows[-1])
         vals.append(np.ones(3 * len(free)))
@@ -257,7 +262,9 @@ class CreepSolver:
                 rows.append((3 * contact[slip][:, None] + np.arange(3)).ravel())
                 cols.append(np.repeat(3 * contact[slip] + a, 3))
                 vals.append(frames[slip, a].ravel())
+                columns[contact[slip], :, a] = frames[slip, a]
             on_punch = np.flatnonzero(coef != 0)
+            bar_normal[contact[on_punch]] = frames[on_punch, 0]
             if len(on_punch):
                 rows.append((3 * contact[on_punch][:, None] + np.arange(3)).ravel())
                 cols.append(np.full(3 * len(on_punch), s_col))
@@ -269,6 +276,7 @@ class CreepSolver:
             s_col = -1
         t = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, size))
         self._t, self._g_const, self._s_col = t, g.ravel(), s_col
+        self._columns, self._bar_normal = columns, bar_normal
         self._constrained = np.concatenate(constrained).astype(np.int64)
         self._reduction_key = key
         return self._t, self._g_const, self._s_col, self._constrained
@@ -282,9 +290,20 @@ class CreepSolver:
             edge = sp.csr_matrix(np.ones((1, asm.size)))
             ones = sp.bmat([[ones, edge.T], [edge, sp.csr_matrix(np.ones((1, 1)))]], format="csr")
         ones.sort_indices()
+        # the blockwise reduction (:mod:`.reduce`) writes in this order: A's rows, each with the
+        # bar's column last, then the bar's row
+        shift = np.arange(asm.size + 1) if self.punch is not None else 0
+        if not np.array_equal(ones.indptr[:asm.size + 1], asm.indptr + shift):
+            raise RuntimeError("the reduced pattern is not the mesh's with the bar's row and column")
         self._pattern = (ones.indptr.astype(np.int64), ones.indices.astype(np.int64))
         rows = np.repeat(np.arange(ones.shape[0]), np.diff(ones.indptr))
         self._pattern_diag = np.flatnonzero(rows == ones.indices)
+        # where each node's own 3 × 3 block is (the friction's stiffness goes there)
+        node = 3 * np.arange(asm.size // 3)[:, None, None]
+        block_rows = np.broadcast_to(node + np.arange(3)[:, None], (len(node), 3, 3))
+        block_cols = np.broadcast_to(node + np.arange(3)[None, :], (len(node), 3, 3))
+        self._node_block = _positions(self._pattern[0], self._pattern[1], block_rows.ravel().astype(np.int64),
+                                      block_cols.ravel().astype(np.int64)).reshape(-1, 3, 3)
 
     def _solve(self, a: sp.csr_matrix, rhs: np.ndarray, force_n: float, guess: np.ndarray | None,
                friction: FrictionLinearised | None = None, rtol: float | None = None):
@@ -359,13 +378,13 @@ class CreepSolver:
         if getattr(self, "_reduced_key", None) != key:
             size = t.shape[1]
             indptr, indices = self._pattern
-            product = (t.T @ a @ t).tocoo()
-            data = np.zeros(len(indices))
-            data[_positions(indptr, indices, product.row.astype(np.int64), product.col.astype(np.int64))] = product.data
+            # Pᵢᵀ Aᵢⱼ Pⱼ block by block on A's own pattern (:mod:`.reduce`)
+            data = reduced_matrix_data(a.indptr, a.indices, a.data, self._columns, self._bar_normal,
+                                       self.punch is not None)
             # a constrained unknown's row is the identity times its node's mean diagonal (q = 0
             # there): the scale it has when it is free, so that the factorisation of one contact
             # set preconditions the next
-            diagonal = a.diagonal()
+            diagonal = a.data[self.diag_index]
             node_scale = np.append(diagonal.reshape(-1, 3).mean(axis=1), diagonal.mean())
             data[self._pattern_diag[self._constrained]] = node_scale[np.minimum(self._constrained // 3,
                                                                                 len(node_scale) - 1)]
@@ -380,11 +399,9 @@ class CreepSolver:
         if friction is None or len(friction.nodes) == 0:
             return reduced
         indptr, indices = self._pattern
-        tangents = 3 * friction.nodes[:, None] + np.array([1, 2])
-        rows = np.repeat(tangents, 2, axis=1).ravel()
-        cols = np.tile(tangents, (1, 2)).ravel()
         data = reduced.data.copy()
-        data[_positions(indptr, indices, rows, cols)] += friction.stiffness_n_m.ravel()
+        # the (2, 2) tangential part of each node's block, row by row as the stiffness
+        data[self._node_block[friction.nodes][:, 1:, 1:].ravel()] += friction.stiffness_n_m.ravel()
         return sp.csr_matrix((data, indices, indptr), shape=reduced.shape)
 
     def _friction(self, u: np.ndarray, round_: int) -> FrictionLinearised:
