@@ -114,6 +114,7 @@ class Evaluator:
         self._client = None
         self._cluster = None
         self._remote = None
+        self._cores = 1   # cores a lone run may use: the local cluster's workers' (1 on a remote one)
         if self.log_path is not None and self.log_path.is_file():
             self._read_log()
 
@@ -164,6 +165,7 @@ class Evaluator:
                                          dashboard_address=None,
                                          silence_logs=logging.WARNING if log.isEnabledFor(logging.DEBUG) else logging.CRITICAL)
             self._client = Client(self._cluster)
+            self._cores = self.workers
         try:
             self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
             yield self
@@ -172,12 +174,14 @@ class Evaluator:
             if self._cluster is not None:
                 self._cluster.close()
             self._client = self._cluster = self._remote = None
+            self._cores = 1
 
     @contextmanager
     def sibling(self, spec: ModelSpec):
         """An evaluator of another model on the same data and this one's running cluster."""
         other = Evaluator(spec, self.data, self.space, workers=self.workers)
         other._client = self._client
+        other._cores = self._cores
         other._remote = self._client.scatter([spec, self.data], broadcast=True)
         try:
             yield other
@@ -217,7 +221,10 @@ class Evaluator:
         if self._client is None:
             raise RuntimeError("the Evaluator needs its cluster: use `with evaluator.cluster():`")
         spec_f, data_f = self._remote
-        futures = {self._client.submit(forward_residuals, spec_f, data_f, k, n, pure=False): i
+        # a batch smaller than the local cluster (the space mapping's lone runs of the final model)
+        # leaves cores idle: its runs take them as MKL and Numba threads
+        threads = max(1, self._cores // max(len(ks), 1))
+        futures = {self._client.submit(forward_residuals, spec_f, data_f, k, n, threads, pure=False): i
                    for i, k in enumerate(ks)}
         results: list[dict] = [{}] * len(ks)
         for done, fut in enumerate(as_completed(futures), 1):
