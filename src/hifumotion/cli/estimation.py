@@ -35,6 +35,7 @@ def calibrate(
     """Estimate force/Young's modulus, Poisson's ratio, β1, β2 from the training frames (Table 1 and better)."""
     from hifumotion.config import validate_config
     from hifumotion.console import StageBars
+    from hifumotion.estimation.calibrate import OBJECTIVES
     from hifumotion.estimation.evaluator import check_search_log
     from hifumotion.estimation.protocol import default_frames, parse_frames
     from hifumotion.io import output_folder
@@ -44,8 +45,8 @@ def calibrate(
 
     if method not in ("least_squares", "cmaes", "table1"):
         raise InputError(f"expected least_squares, cmaes or table1, got {method!r}", "--method")
-    if objective not in ("auto", "contour", "contour+displacement"):
-        raise InputError(f"expected auto, contour or contour+displacement, got {objective!r}", "--objective")
+    if objective not in OBJECTIVES:
+        raise InputError(f"expected {', '.join(OBJECTIVES)}, got {objective!r}", "--objective")
     if tracking not in ("speckle", "glcv"):
         raise InputError(f"expected speckle or glcv, got {tracking!r}", "--tracking")
     if resume is not None:

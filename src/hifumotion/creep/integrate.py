@@ -444,6 +444,14 @@ class CreepSolver:
         # place, and the next rounds' friction, lagging the normal reactions, does not bring it back)
         cs.pressure[first] = force_n / len(first)
 
+    def _place_bar(self, u: np.ndarray, advance_m: float | None, unloaded: bool) -> None:
+        """The bar after a solve: at the solved advance (m) where it was an unknown, resting on
+        the tissue (``u``, m, flat) where it pushes nothing."""
+        if advance_m is not None:
+            self.advance_m = float(advance_m)
+        if unloaded:
+            self._follow(u.reshape(-1, 3))
+
     def _follow(self, u: np.ndarray) -> None:
         """An unloaded bar's face onto the nearest tissue under it (its advance, m); kept if none is."""
         along, under = self.contacts.under_face(u, 0.0)
@@ -473,10 +481,7 @@ class CreepSolver:
             self.stats["rounds"] += 1
             friction = self._friction(guess.reshape(-1, 3), round_)
             new, s = self._solve(a, base, force, guess, friction, self.settings.round_rtol)
-            if s is not None:
-                self.advance_m = float(s)
-            if unloaded:
-                self._follow(new.reshape(-1, 3))
+            self._place_bar(new, s, unloaded)
             # the constraints' reactions: their normal parts set the friction's μ_f λ_n
             reaction = (a @ new - base).reshape(-1, 3)
             unew = new.reshape(-1, 3)
@@ -491,10 +496,7 @@ class CreepSolver:
                 self.stats["friction_rounds"] += 1
         new, s = self._polish()
         unew = new.reshape(-1, 3)
-        if s is not None:
-            self.advance_m = float(s)
-        if unloaded:
-            self._follow(unew)
+        self._place_bar(new, s, unloaded)
         cs.record_pressure((a @ new - base).reshape(-1, 3))
         cs.slide(unew, self.settings.stick_mm * MM)
         gap, which = cs.gaps(unew, self.advance_m)
