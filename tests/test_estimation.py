@@ -407,3 +407,32 @@ def test_contour_residuals_are_weighted_by_the_tracking_quality_at_each_point():
     unseen = DisplacementSeries(np.zeros((3, 40, 40, 2), np.float32), np.zeros((3, 40, 40), np.float32), (0.5, 0.5))
     with pytest.raises(InputError, match="quality"):
         data.with_contour_weights(unseen, rest)
+
+
+@pytest.mark.slow
+def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path):
+    """``hifumotion predict CAL/`` must predict with the calibrated model itself: the same
+    conforming voxel mesh, so the same motion as the calibration held in memory."""
+    from hifumotion.estimation.store import load_calibration
+    from hifumotion.metrics import dice
+    from hifumotion.observed import load_observed
+    from hifumotion.prediction.pipeline import predict_calibrated
+    from hifumotion.workflow.pipeline import EstimationConfig, observe_and_calibrate
+
+    folder, _ = small_twin
+    observed = load_observed(folder / "observed")
+    train, valid = default_frames(len(observed.frames))
+    settings = EstimationConfig(particles=300, search_particles=150, max_evaluations=1, workers=1)
+    observation, cal = observe_and_calibrate(observed, tmp_path / "cal", settings, train)
+    spec, k, reference, _ = load_calibration(tmp_path / "cal")
+    assert k.as_dict() == pytest.approx(cal.parameters.as_dict(), rel=1e-9)
+    # the same mesh: the loaded model's voxels conform to the reconstructed surface as the fitted one's
+    assert spec.voxels().nodes_mm.shape == cal.spec.voxels().nodes_mm.shape
+    assert np.abs(spec.voxels().nodes_mm - cal.spec.voxels().nodes_mm).max() < 1e-4
+    frames = [max(valid)]
+    memory = predict_calibrated(cal.spec, cal.parameters, observation.reference_shape(), frames)
+    saved = predict_calibrated(spec, k, reference, frames)
+    motion = np.sqrt(np.mean(np.sum((memory.run.points_mm - memory.run.points_mm[:1]) ** 2, axis=-1)))
+    assert motion > 0
+    assert np.abs(saved.run.points_mm - memory.run.points_mm).max() < 1e-3 * motion
+    assert dice(saved.masks[frames[0]], memory.masks[frames[0]]) > 0.999

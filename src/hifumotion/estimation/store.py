@@ -7,6 +7,7 @@
     model/scene.toml          the fitted model at the paper's resolution (``hifumotion simulate`` runs it)
     model/tissue_particles.csv
     model/contour_points.csv  the contour points A (tank mm)
+    model/tissue_surface.npz  the reconstructed surface the model's voxels conform to (tank mm, float64)
     observation/reference.npz the frame-0 shape: in-plane mask and the reconstruction's distance grid
     observation/frames/       the tracked (or given) masks of every frame, 0/255 PNG
     observation/sweep/        the sweep's masks
@@ -66,6 +67,13 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
     _csv(folder / "model" / "tissue_particles.csv", "x_mm,y_mm,z_mm,volume_mm3",
          np.column_stack([spec.tissue_mm, spec.tissue_volume_mm3]))
     _csv(folder / "model" / "contour_points.csv", "x_mm,y_mm,z_mm", spec.points_mm)
+    if spec.surface_vertices_mm is not None:
+        # the model's voxels conform to this surface (ModelSpec.voxels): without it a loaded
+        # calibration would run another mesh than the one that was fitted
+        with atomic_path(folder / "model" / "tissue_surface.npz") as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, vertices_mm=np.asarray(spec.surface_vertices_mm, float),
+                                    faces=np.asarray(spec.surface_faces, np.int64))
     rec = obs.reconstruction
     ref = obs.reference_shape()
     plane = ref.plane
@@ -123,7 +131,11 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
 
 
 def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, ReferenceShape, dict]:
-    """The fitted model, its parameters, the frame-0 reference shape and ``parameters.json``."""
+    """The fitted model, its parameters, the frame-0 reference shape and ``parameters.json``.
+
+    The model is the one that was fitted: its particles, its contour points and the surface
+    its voxels conform to (``model/tissue_surface.npz``; a folder written before that file
+    existed runs an unconformed mesh, as it did then)."""
     from hifumotion.particles.scene import load_scene, read_particles_csv
 
     folder = Path(folder)
@@ -143,8 +155,9 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
     scene = load_scene(folder / "model" / "scene.toml")
     tissue, volume = read_particles_csv(folder / "model" / "tissue_particles.csv")
     points, _ = read_particles_csv(folder / "model" / "contour_points.csv")
+    vertices, faces = _surface(folder / "model" / "tissue_surface.npz")
     spec = ModelSpec(scene, tissue, volume if volume is not None else np.full(len(tissue), scene.particles.spacing_mm ** 3),
-                     points, interval, settings)
+                     points, interval, settings, vertices, faces)
     ref_path = folder / "observation" / "reference.npz"
     if not ref_path.is_file():
         raise InputError("no such file", ref_path)
@@ -154,6 +167,22 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
     ref = ReferenceShape(z["frame0_mask"].astype(bool), plane, z["rec_distance_mm"].astype(float),
                          float(z["rec_voxel_mm"]), tuple(z["rec_origin_mm"].tolist()))
     return spec, k, ref, meta
+
+
+def _surface(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The model's surface (vertices mm, faces) from ``path``; (None, None) when there is none."""
+    if not path.exists():
+        return None, None
+    try:
+        with np.load(path) as z:
+            vertices, faces = np.asarray(z["vertices_mm"], float), np.asarray(z["faces"], np.int64)
+    except (OSError, KeyError, ValueError) as exc:
+        raise InputError(f"unreadable model surface ({exc}); expected vertices_mm and faces", path) from None
+    if (vertices.ndim != 2 or vertices.shape[1:] != (3,) or faces.ndim != 2 or faces.shape[1:] != (3,)
+            or not np.isfinite(vertices).all() or faces.min(initial=0) < 0 or faces.max(initial=0) >= len(vertices)):
+        raise InputError("malformed model surface: expected finite (V, 3) vertices_mm and (F, 3) faces indexing them",
+                         path)
+    return vertices, faces
 
 
 __all__ = ["save_calibration", "load_calibration"]
