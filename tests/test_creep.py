@@ -278,3 +278,66 @@ def test_the_blockwise_reduction_is_the_sparse_product():
     # a constrained unknown: an identity row and column, scaled to its node's diagonal
     assert np.all(got[constrained][:, free] == 0.0) and np.all(got[free][:, constrained] == 0.0)
     assert np.all(np.diag(got)[constrained] > 0)
+
+
+def _reduced_of(solver, runs, **settings):
+    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
+
+    return ReducedCreep(solver, pod_basis(runs), ReducedSettings(**settings))
+
+
+def test_the_reduced_model_creeps_by_the_kelvin_voigt_law_under_a_force_its_snapshots_never_had():
+    # the snapshots at one force, the reduced run at three times it: ε(t) = σ/E (1 − exp(−E t / 2μ))
+    n, e, mu, force = 3, 5e3, 2e3, 0.01
+    tau = 2 * mu / e
+    times = np.array([0.0, 0.5, 1.0, 2.0, 4.0]) * tau
+    mesh = voxel_mesh(block(n), 1.0)
+    material = CreepMaterial(e, 0.0, beta1=mu, beta2=0.0, density_kg_m3=1e-3, rate_floor_per_s=1e-12)
+
+    def solver_at(f):
+        punch = Punch((n / 2 * MM, n * MM, n / 2 * MM), (0.0, -1.0, 0.0), 10 * n * MM, lambda t: f if t > 0 else 0.0)
+        return CreepSolver(mesh, material, Surroundings((0.0, 0.0, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch,
+                           CreepSettings(tolerance=0.001))
+
+    full = solver_at(force)
+    reduced = _reduced_of(full, [full.run(times)], tolerance=0.001)
+    r = reduced.run(material, lambda t: 3 * force if t > 0 else 0.0, (), times)
+    final = 3 * force / (n * MM) ** 2 / e * n
+    expected = final * (1 - np.exp(-times / tau))
+    assert np.abs(r.advance_mm - expected).max() <= 0.02 * final
+    assert r.stats["modes"] <= 4
+
+
+@pytest.mark.parametrize("scale", [0.7, 1.4])
+def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snapshots_never_had(scale):
+    # an ellipsoid pushed onto a rough floor: its curved bottom lands on the floor as it is
+    # squashed, so the contact set grows. The modes come from full runs at half and twice
+    # the push; the reduced run at a push between must keep to the full run's motion (3 % of
+    # it) and off the floor.
+    from hifumotion.creep.scene import creep_solver, output_times, scene_material, scene_punch, simulate_creep, tissue_mesh
+    from hifumotion.particles.scene import Scene
+
+    def scene_at(f):
+        return Scene.model_validate({
+            "tissue": {"shape": "ellipsoid", "size_mm": [30, 18, 24], "youngs_modulus_pa": 1e4, "poisson_ratio": 0.46,
+                       "beta1": 5e5, "beta2": 0.5},
+            "bar": {"radius_mm": 5.0, "force_n": 0.5 * f, "ramp_s": 1.0}, "particles": {"spacing_mm": 3.0},
+            "run": {"duration_s": 6.0, "output_interval_s": 0.1, "write_vtu": False}})
+
+    mesh, vol = tissue_mesh(scene_at(1.0))
+    snapshots = []
+    for f in (0.5, 2.0):
+        simulate_creep(scene_at(f), mesh=mesh, tissue_particles=(mesh.centres_mm, vol), keep=snapshots)
+    reduced = _reduced_of(creep_solver(scene_at(1.0), mesh)[0], snapshots)
+    scene = scene_at(scale)
+    truth = []
+    simulate_creep(scene, mesh=mesh, tissue_particles=(mesh.centres_mm, vol), keep=truth)
+    punch, _ = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
+    r = reduced.run(scene_material(scene), punch.force_n, punch.breakpoints_s, output_times(scene))
+    moved = truth[0].particles_mm - truth[0].particles_mm[:1]
+    motion = np.sqrt(np.mean(np.sum(moved ** 2, axis=-1), axis=1))
+    error = np.sqrt(np.mean(np.sum((r.particles_mm - r.particles_mm[:1] - moved) ** 2, axis=-1), axis=1))
+    assert motion.max() > 0.3     # mm: a push that squashes it
+    assert error.max() <= 0.03 * motion.max()
+    assert r.nodes_mm[..., 1].min() >= -1e-3 * scene.particles.spacing_mm     # nothing through the floor
+    assert r.stats["contact_solves"] > 0

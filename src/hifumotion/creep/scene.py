@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.creep.contact import Plane, Punch
-from hifumotion.creep.integrate import CreepMaterial, CreepSettings, CreepSolver, Surroundings
+from hifumotion.creep.integrate import CreepMaterial, CreepResult, CreepSettings, CreepSolver, Surroundings
 from hifumotion.creep.voxels import conform, voxel_mesh
 from hifumotion.particles.scene import Scene, tissue_particles_mm, touching_tip
 from hifumotion.particles.simulate import SimulationResult
@@ -103,15 +103,53 @@ def tissue_mesh(scene: Scene, tissue_particles=None, surface=None):
     return mesh, vol_mm3
 
 
+def creep_solver(scene: Scene, mesh, settings: CreepSettings | None = None) -> tuple[CreepSolver, np.ndarray]:
+    """The fast path's solver of ``scene`` on the voxel mesh ``mesh`` (the tank's planes, the
+    water's buoyancy, the bar as a punch), and the bar's unit axis."""
+    punch, axis = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
+    water = scene.tank.water_depth_mm * MM if scene.tank.water_depth_mm > 0 else None
+    surroundings = Surroundings((0.0, -scene.physics.gravity_m_s2, 0.0), scene.physics.water_density_kg_m3, water)
+    return CreepSolver(mesh, scene_material(scene), surroundings, tank_planes(scene), punch, settings), axis
+
+
+def output_times(scene: Scene) -> np.ndarray:
+    """The scene's frame times (s): every output interval from 0 to the run's duration."""
+    run = scene.run
+    n_frames = int(math.floor(run.duration_s / run.output_interval_s + 1e-9)) + 1
+    return np.arange(n_frames) * run.output_interval_s
+
+
+def bar_centres(scene: Scene, punch, axis: np.ndarray, result: CreepResult) -> np.ndarray:
+    """``(frames, 3)`` the bar's centre (mm) at each frame of ``result``; NaN without a bar."""
+    if punch is None:
+        return np.full((len(result.times_s), 3), np.nan)
+    tip = np.asarray(punch.tip_m) / MM + result.stats["advance_at_rest_mm"] * axis
+    return tip[None] + result.advance_mm[:, None] * axis[None] - 0.5 * scene.bar.length_mm * axis[None]
+
+
+def simulation_result(scene: Scene, mesh, vol_mm3: np.ndarray, result: CreepResult, bar: np.ndarray,
+                      integrator: str) -> SimulationResult:
+    """A fast-path run as the explicit path's :class:`SimulationResult`, its facts named for ``integrator``."""
+    dx = scene.particles.spacing_mm
+    facts = {"spacing_mm": dx, "integrator": integrator, "nodes": mesh.n_nodes,
+             "counts": {"tissue": len(mesh.centres_mm)}, "tissue_volume_mm3": float(vol_mm3.sum()),
+             "bar_force_n": result.bar_force_n.tolist(), **{f"creep_{k}": v for k, v in result.stats.items()}}
+    return SimulationResult(result.times_s, result.particles_mm, vol_mm3, bar, dx, int(result.stats["steps"]),
+                            facts, None)
+
+
 def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Callable[[float], None] | None = None,
                    tissue_particles: tuple[np.ndarray, np.ndarray] | None = None,
-                   settings: CreepSettings | None = None, surface=None, mesh=None) -> SimulationResult:
+                   settings: CreepSettings | None = None, surface=None, mesh=None,
+                   keep: list | None = None) -> SimulationResult:
     """Run ``scene`` on the fast path: settled state at t = 0, then the push (module docstring).
 
     ``surface`` (a closed ``trimesh.Trimesh``, mm) is the tissue's true surface, onto which
     the voxels' boundary nodes are moved (default: the scene's ellipsoid or box; none for
     particles from a CSV or memory); ``mesh`` a :class:`~.voxels.VoxelMesh` made before
     (a fit's many runs). ``folder``, if given and ``run.write_vtu``, receives the frames as VTU + PVD.
+    ``keep``, a list, receives the run's :class:`~.integrate.CreepResult` (its nodes: the
+    reduced model's snapshots).
     """
     dx = scene.particles.spacing_mm
     if mesh is None:
@@ -119,29 +157,16 @@ def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Cal
     else:
         vol_mm3 = (np.asarray(tissue_particles[1], float) if tissue_particles is not None
                    else np.full(len(mesh.centres_mm), dx ** 3))
-    tissue_mm = mesh.centres_mm
-    punch, axis = scene_punch(scene, tissue_mm, dx)
-    water = scene.tank.water_depth_mm * MM if scene.tank.water_depth_mm > 0 else None
-    surroundings = Surroundings((0.0, -scene.physics.gravity_m_s2, 0.0), scene.physics.water_density_kg_m3, water)
-    solver = CreepSolver(mesh, scene_material(scene), surroundings, tank_planes(scene), punch, settings)
-    run = scene.run
-    n_frames = int(math.floor(run.duration_s / run.output_interval_s + 1e-9)) + 1
-    times = np.arange(n_frames) * run.output_interval_s
-    result = solver.run(times, progress)
-    if punch is not None:
-        tip = np.asarray(punch.tip_m) / MM + result.stats["advance_at_rest_mm"] * axis
-        bar = tip[None] + result.advance_mm[:, None] * axis[None] - 0.5 * scene.bar.length_mm * axis[None]
-    else:
-        bar = np.full((n_frames, 3), np.nan)
-    facts = {"spacing_mm": dx, "integrator": "implicit", "nodes": mesh.n_nodes,
-             "counts": {"tissue": len(tissue_mm)}, "tissue_volume_mm3": float(vol_mm3.sum()),
-             "bar_force_n": result.bar_force_n.tolist(), **{f"creep_{k}": v for k, v in result.stats.items()}}
-    sim = SimulationResult(times, result.particles_mm, vol_mm3, bar, dx, int(result.stats["steps"]), facts, None)
-    if folder is not None and run.write_vtu:
+    solver, axis = creep_solver(scene, mesh, settings)
+    result = solver.run(output_times(scene), progress)
+    if keep is not None:
+        keep.append(result)
+    sim = simulation_result(scene, mesh, vol_mm3, result, bar_centres(scene, solver.punch, axis, result), "implicit")
+    if folder is not None and scene.run.write_vtu:
         from hifumotion.creep.output import write_frames
 
-        write_frames(folder, sim, mesh, result, run.vtu_every)
+        write_frames(folder, sim, mesh, result, scene.run.vtu_every)
     return sim
 
 
-__all__ = ["simulate_creep", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]
+__all__ = ["simulate_creep", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]

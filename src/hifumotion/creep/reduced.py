@@ -1,0 +1,341 @@
+"""The reduced forward model: the fast path's creep projected on the modes of its own runs (SI inside).
+
+The fast path (:mod:`.integrate`) solves, per backward-Euler step, a system of three
+unknowns per voxel corner (≈ 17,000 at the paper's 4,399 particles) with contacts as
+constraints, several rounds a step. The motion those steps produce lives in a space of
+a few tens of shapes: the bar's indentation, the bulge beside it, the creep that follows.
+This module keeps only those (proper orthogonal decomposition, POD) and integrates the
+same equation of motion in them (Galerkin projection, Goury & Duriez, IEEE T-RO 2018;
+SOFA's ModelOrderReduction):
+
+* **Basis.** Snapshots are full runs' displacements since their settled state, each with
+  the bar's advance s beside the node displacements: ``x = [u; s]``. The left singular
+  vectors ``V = [V_u; v_s]`` that hold all but ``1 − energy`` of the snapshots' squared
+  norm are the modes (:func:`pod_basis`). A mode is a combination of snapshots, so it keeps
+  every linear constraint all of them keep: a floor node that stuck in every snapshot stays
+  on the floor, the nodes under the bar's face move with its advance. Contact therefore
+  needs no active set here — that is the approximation: a contact that opens or closes in
+  no snapshot cannot open or close in the reduced model.
+* **Equation.** ``u = u₀ + V_u q``, ``s = s₀ + v_sᵀ q`` from the settled state (u₀, s₀),
+  in equilibrium under gravity and F(0). Backward Euler on Eq. 12–16's forces, projected:
+
+      (K_r + C_r(μ)/Δt + M_r/Δt²) q₊ = (F(t₊) − F(0)) v_s + M_r/Δt² (q + Δt q̇) + C_r(μ)/Δt q
+
+  with ``K_r = 2G V_uᵀ K_dev V_u + κ V_uᵀ K_vol V_u`` (E and ν scale two matrices made
+  once), ``C_r(μ) = Σ_e μ_e V_eᵀ C_e V_e`` (Eq. 16's μ per voxel from its shear rate, the
+  full model's :meth:`~.hexahedra.MeshMatrices.rates` on ``V_u q̇``: the viscosity's
+  non-linearity is kept whole), ``M_r = V_uᵀ M V_u``. The force F(t) does the work
+  ``F s``, so its generalised force is ``F v_s``. The contacts' reactions do no work on
+  the modes (a stuck node does not move; a pressed one moves only along its surface), so
+  they leave the projected equation.
+* **Steps** as the full model's: the local error ``½ Δt |u̇₊ − u̇|`` held near
+  ``tolerance`` spacings on a ladder of step sizes, landing on the force schedule's
+  breakpoints, frames interpolated between steps.
+
+One step costs a dense r × r solve and the voxels' rates: about 10⁴ times less than the
+full step at r ≈ 20 (docs/decisions.md).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from hifumotion.creep.integrate import CreepMaterial, CreepResult
+from hifumotion.errors import InputError
+
+MM = 1e-3
+
+
+@dataclass(frozen=True)
+class ReducedBasis:
+    """The modes of the motion from a settled state (SI).
+
+    Attributes
+    ----------
+    node_modes_m
+        ``(3n, r)`` node displacements (m) per unit of each reduced coordinate; orthonormal
+        together with ``advance_modes_m``.
+    advance_modes_m
+        ``(r,)`` the bar's advance (m) per unit of each coordinate.
+    settled_nodes_mm
+        ``(n, 3)`` the nodes of the settled state the snapshots started from (mm).
+    advance_at_rest_mm
+        The bar's advance at rest from its scene tip (mm), as :class:`~.integrate.CreepResult`'s.
+    singular_values
+        Every singular value of the snapshot matrix (the energy the modes keep).
+    max_motion_mm
+        The largest node displacement in the snapshots (mm).
+    """
+
+    node_modes_m: np.ndarray
+    advance_modes_m: np.ndarray
+    settled_nodes_mm: np.ndarray
+    advance_at_rest_mm: float
+    singular_values: np.ndarray
+    max_motion_mm: float
+
+    @property
+    def size(self) -> int:
+        return self.node_modes_m.shape[1]
+
+
+def pod_basis(runs: Sequence[CreepResult], energy: float = 1.0 - 1e-8, max_modes: int = 40) -> ReducedBasis:
+    """The POD modes of full runs' motion (each since its own frame 0, the settled state).
+
+    ``energy``: the fraction of the snapshots' squared norm the modes keep; ``max_modes``
+    caps their count. The settled state is the first run's.
+    """
+    if not runs:
+        raise InputError("the reduced model needs at least one full run for its snapshots", "snapshots")
+    if not 0.0 < energy < 1.0:
+        raise InputError(f"energy must be in (0, 1), got {energy}", "energy")
+    columns = []
+    for r in runs:
+        u = (r.nodes_mm - r.nodes_mm[:1]).reshape(len(r.nodes_mm), -1) * MM
+        s = (r.advance_mm - r.advance_mm[0])[:, None] * MM
+        columns.append(np.hstack([u, s])[1:])
+    x = np.vstack(columns).T           # (3n + 1, snapshots)
+    left, sigma, _ = np.linalg.svd(x, full_matrices=False)
+    if sigma[0] <= 0:
+        raise InputError("the full runs did not move: no modes to reduce onto", "snapshots")
+    kept = np.cumsum(sigma ** 2) / np.sum(sigma ** 2)
+    r = int(min(np.searchsorted(kept, energy) + 1, max_modes, len(sigma)))
+    return ReducedBasis(np.ascontiguousarray(left[:-1, :r]), left[-1, :r].copy(), runs[0].nodes_mm[0].copy(),
+                        float(runs[0].stats.get("advance_at_rest_mm", 0.0)), sigma,
+                        float(np.sqrt((x[:-1].reshape(-1, 3, x.shape[1]) ** 2).sum(axis=1)).max()) / MM)
+
+
+@dataclass
+class ReducedSettings:
+    """Numerical settings of the reduced model.
+
+    Attributes
+    ----------
+    energy, max_modes
+        What :func:`pod_basis` keeps.
+    contact_reach
+        Contact candidates: the surface nodes closer to a solid at rest than the snapshots'
+        largest node motion plus this many spacings.
+    contact_tolerance
+        A candidate is in contact when its gap is below this many spacings.
+    tolerance, max_step_s, first_step_s
+        The step controller's, as :class:`~.integrate.CreepSettings` (spacings, s).
+    """
+
+    energy: float = 1.0 - 1e-8
+    max_modes: int = 40
+    contact_reach: float = 1.0
+    contact_tolerance: float = 1e-4
+    tolerance: float = 0.005
+    max_step_s: float = 1.0
+    first_step_s: float | None = None
+
+
+class ReducedCreep:
+    """The creep of a voxel mesh in a :class:`ReducedBasis` (module docstring).
+
+    Made once per mesh and basis from the full solver's matrices (``solver``, a
+    :class:`~.integrate.CreepSolver` of the same mesh); each :meth:`run` takes its own
+    material and force, so a fit's many parameter sets share it.
+    """
+
+    def __init__(self, solver, basis: ReducedBasis, settings: ReducedSettings | None = None):
+        self.basis = basis
+        self.settings = settings or ReducedSettings()
+        self.mesh = solver.mesh
+        self.matrices = solver.matrices
+        self.dx_m = solver.dx_m
+        v = basis.node_modes_m
+        m = solver.matrices
+        k_dev, k_vol = m.matrix(1.0, 0.0, 0.0), m.matrix(0.0, 1.0, 0.0)
+        self.deviatoric = v.T @ (k_dev @ v)     # per unit 2G
+        self.volumetric = v.T @ (k_vol @ v)     # per unit κ
+        # the loads in total, not from the settled state: a contact that held the weight must
+        # give that reaction back before it opens (an increment could lift it off for free)
+        settled_m = basis.settled_nodes_mm.ravel() * MM - solver.rest_m.ravel()
+        self.settled_deviatoric = v.T @ (k_dev @ settled_m)
+        self.settled_volumetric = v.T @ (k_vol @ settled_m)
+        self.weight = v.T @ solver.body_force.ravel() - solver.anchor_stiffness * (v.T @ settled_m)
+        self.mass = v.T @ (np.repeat(solver.mass, 3)[:, None] * v)
+        self.anchor = solver.anchor_stiffness * (v.T @ v)
+        # Σ_e μ_e V_eᵀ C_e V_e: one r × r block per voxel
+        elements = m.elements
+        dofs = (3 * elements[:, :, None] + np.arange(3)).reshape(len(elements), 24)
+        ve = v[dofs]                                        # (voxels, 24, r)
+        blocks = np.empty((len(elements), v.shape[1], v.shape[1]))
+        reg, dis = m.regular, m.distorted
+        blocks[reg] = np.matmul(ve[reg].transpose(0, 2, 1), np.matmul(m.cube.viscous, ve[reg]))
+        if len(dis):
+            blocks[dis] = np.matmul(ve[dis].transpose(0, 2, 1), np.matmul(m.visc, ve[dis]))
+        self.viscous = blocks.reshape(len(elements), -1)
+        # each particle moves by its voxel corners' mean displacement (VoxelMesh.particles)
+        self.particle_modes_mm = ve.reshape(len(elements), 8, 3, -1).mean(axis=1) / MM   # (voxels, 3, r)
+        self.settled_particles_mm = self.mesh.particles(basis.settled_nodes_mm)
+        self.rows, self.bound, self._face = self._contact_rows(solver.contacts)
+
+    def _contact_rows(self, contacts):
+        """Non-penetration of the contact candidates as ``rows @ q ≥ bound`` (m), and the bar
+        face's rows: ``(which rows, their nodes' offsets across the axis at q = 0 (m), and
+        those offsets' modes)``, so that a row holds only while its node is under the face.
+
+        A candidate's gap is ``g₀ + G q``: a plane's ``n·(x − p)``, the bar's face
+        ``a·(x − tip) − s``; rows whose G vanishes (a node every mode keeps on its solid) are
+        left out. A node that starts inside a solid may not go deeper (bound −max(g₀, 0))."""
+        b = self.basis
+        settled = b.settled_nodes_mm * MM
+        v = b.node_modes_m.reshape(len(settled), 3, -1)
+        # a node as far from a solid as the snapshots' largest motion may reach it
+        reach = self.settings.contact_reach * self.dx_m + b.max_motion_mm * MM
+        surface = np.unique(self.mesh.surface_faces())
+        rows, bound = [], []
+        for k, plane in enumerate(contacts.planes):
+            normal = contacts.body_frames[k, 0]
+            gap = (settled[surface] - np.asarray(plane.point_m)) @ normal
+            near = surface[gap < reach]
+            rows.append(np.einsum("k,nkr->nr", normal, v[near]))
+            bound.append(-np.maximum(gap[gap < reach], 0.0))
+        if contacts.punch is not None:
+            a = contacts.body_frames[contacts.punch_index, 0]
+            rel = settled[surface] - (np.asarray(contacts.punch.tip_m) + b.advance_at_rest_mm * MM * a)
+            along = rel @ a
+            across = np.linalg.norm(rel - along[:, None] * a, axis=1)
+            near = (along < reach) & (across <= contacts.punch.radius_m + reach)
+            rows.append(np.einsum("k,nkr->nr", a, v[surface[near]]) - b.advance_modes_m[None])
+            bound.append(-np.maximum(along[near], 0.0))
+            lateral = rel[near] - along[near, None] * a[None]
+            lateral_modes = v[surface[near]] - np.einsum("k,nkr->nr", a, v[surface[near]])[:, None, :] * a[None, :, None]
+        rows, bound = np.vstack(rows), np.concatenate(bound)
+        active = np.abs(rows).max(axis=1) > 1e-9 * np.abs(rows).max()
+        face = None
+        if contacts.punch is not None:
+            first = len(bound) - len(lateral)
+            keep = active[first:]
+            which = np.flatnonzero(active)[np.flatnonzero(active) >= first]
+            position = np.searchsorted(np.flatnonzero(active), which)
+            face = (position, lateral[keep], lateral_modes[keep], contacts.punch.radius_m)
+        return np.ascontiguousarray(rows[active]), bound[active], face
+
+    def _rows_at(self, q: np.ndarray) -> np.ndarray:
+        """Which contact rows hold at ``q``: all the planes', the bar face's for nodes under it."""
+        holds = np.ones(len(self.rows), bool)
+        if self._face is not None:
+            position, lateral, modes, radius = self._face
+            across = np.linalg.norm(lateral + modes @ q, axis=1)
+            holds[position] = across <= radius
+        return holds
+
+    def _solve(self, a: np.ndarray, rhs: np.ndarray, stats: dict, at: np.ndarray) -> np.ndarray:
+        """``argmin ½ qᵀ a q − rhsᵀ q`` with the gap of every candidate that holds at ``at`` ≥ 0
+        (a least-distance problem, by NNLS)."""
+        from scipy.linalg import solve_triangular
+        from scipy.optimize import nnls
+
+        q = np.linalg.solve(a, rhs)
+        tol = self.settings.contact_tolerance * self.dx_m
+        holds = self._rows_at(at)
+        rows, bound = self.rows[holds], self.bound[holds]
+        if len(rows) == 0 or np.all(rows @ q >= bound - tol):
+            return q
+        stats["contact_solves"] += 1
+        low = np.linalg.cholesky(a)
+        y0 = solve_triangular(low, rhs, lower=True)
+        h_rows = solve_triangular(low, rows.T, lower=True).T       # G L⁻ᵀ
+        h = bound - h_rows @ y0
+        # Lawson & Hanson's least-distance programming: min |z| with h_rows z ≥ h
+        e = np.vstack([h_rows.T, h[None]])
+        f = np.zeros(len(e))
+        f[-1] = 1.0
+        weights, _ = nnls(e, f, maxiter=50 * e.shape[1])
+        residual = e @ weights - f
+        if abs(residual[-1]) < 1e-12:
+            raise InputError("the reduced model's contacts cannot all be kept", "reduced model")
+        z = -residual[:-1] / residual[-1]
+        return solve_triangular(low.T, y0 + z, lower=False)
+
+    def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> np.ndarray:
+        """C_r (r × r) at the voxels' shear rates of the reduced velocity ``qdot`` (Eq. 16)."""
+        velocity = (self.basis.node_modes_m @ qdot).reshape(-1, 3)
+        mu = material.viscosity(self.matrices.rates(velocity))
+        r = len(qdot)
+        return (mu @ self.viscous).reshape(r, r)
+
+    def run(self, material: CreepMaterial, force_n: Callable[[float], float], breakpoints_s: Sequence[float],
+            output_times_s: np.ndarray, progress: Callable[[float], None] | None = None) -> CreepResult:
+        """Push from the settled state: ``force_n(t)`` (N) on the bar; frames at ``output_times_s``.
+
+        Returns the full model's :class:`~.integrate.CreepResult` (nodes, particles, the
+        bar's advance and force at every frame).
+        """
+        started = time.perf_counter()
+        times = np.asarray(output_times_s, float)
+        if times.ndim != 1 or len(times) == 0 or np.any(np.diff(times) <= 0) or times[0] < 0:
+            raise InputError("output times must be increasing and ≥ 0 s", "output_times_s")
+        lam, g = material.lame()
+        st = self.settings
+        b = self.basis
+        r = b.size
+        kappa = lam + 2 * g / 3
+        stiffness = 2 * g * self.deviatoric + kappa * self.volumetric + self.anchor
+        # u = u₀ + V q: the loads at q = 0 — the weight, less the elastic force of u₀
+        load = self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric
+        f0 = float(force_n(0.0))
+        stats = {"steps": 0, "rejected": 0, "modes": r, "contact_solves": 0, "contact_rows": len(self.rows)}
+        # frame 0: static equilibrium under the weight and F(0) in this material (the snapshots'
+        # settled state u₀ was another material's)
+        q = self._solve(stiffness, load + f0 * b.advance_modes_m, stats, np.zeros(r))
+        qdot = np.zeros(r)
+        t = 0.0
+        interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)
+        base = st.first_step_s or interval / 4.0
+        level = 0
+        breaks = sorted(x for x in breakpoints_s if x > 0) + [times[-1]]
+        saved_t, saved_q, saved_f = [0.0], [q.copy()], [f0]
+        visc = np.zeros((r, r)) if material.beta1 <= 0 else self._viscosity(material, qdot)
+        calm = 0
+        limit = st.tolerance * self.dx_m
+        while t < times[-1] - 1e-12:
+            dt = min(base * 2.0 ** level, st.max_step_s)
+            nxt = next(x for x in breaks if x > t + 1e-12)
+            landing = t + dt >= nxt - 1e-9 * dt
+            if landing:
+                dt = nxt - t
+            force = float(force_n(t + dt))
+            a = stiffness + visc / dt + self.mass / dt ** 2
+            rhs = load + force * b.advance_modes_m + self.mass @ (q + dt * qdot) / dt ** 2 + visc @ q / dt
+            qnew = self._solve(a, rhs, stats, q)
+            qdot_new = (qnew - q) / dt
+            err = 0.5 * dt * np.abs(b.node_modes_m @ (qdot_new - qdot)).max()
+            if err > 2.0 * limit and dt > 1e-6 * base and not (t == 0.0 and level < -12):
+                stats["rejected"] += 1
+                level -= 1
+                calm = 0
+                continue
+            stats["steps"] += 1
+            t += dt
+            q, qdot = qnew, qdot_new
+            if material.beta1 > 0:
+                visc = self._viscosity(material, qdot)   # Eq. 16's μ from this step's rates (lagged, as the full model)
+            saved_t.append(t)
+            saved_q.append(q.copy())
+            saved_f.append(force)
+            calm = calm + 1 if err < 0.25 * limit else 0
+            if calm >= 2 and not landing:
+                level += 1
+                calm = 0
+            if progress is not None:
+                progress(min(t / times[-1], 1.0))
+        st_t, st_q = np.array(saved_t), np.array(saved_q)
+        qs = np.stack([np.interp(times, st_t, st_q[:, k]) for k in range(r)], axis=1)   # (frames, r)
+        nodes_mm = b.settled_nodes_mm[None] + (qs @ b.node_modes_m.T).reshape(len(times), -1, 3) / MM
+        particles = self.settled_particles_mm[None] + np.einsum("ekr,fr->fek", self.particle_modes_mm, qs)
+        advance_mm = (qs - qs[:1]) @ b.advance_modes_m / MM
+        force = np.interp(times, st_t, np.array(saved_f))
+        stats.update(seconds=time.perf_counter() - started, advance_at_rest_mm=b.advance_at_rest_mm)
+        return CreepResult(times, nodes_mm, particles, advance_mm, force, stats)
+
+
+__all__ = ["ReducedBasis", "ReducedSettings", "ReducedCreep", "pod_basis"]
