@@ -229,32 +229,37 @@ class ReducedCreep:
         return holds
 
     def _solve(self, a: np.ndarray, rhs: np.ndarray, stats: dict, at: np.ndarray) -> np.ndarray:
-        """``argmin ½ qᵀ a q − rhsᵀ q`` with the gap of every candidate that holds at ``at`` ≥ 0
-        (a least-distance problem, by NNLS)."""
-        from scipy.linalg import solve_triangular
-        from scipy.optimize import nnls
+        """``argmin ½ qᵀ a q − rhsᵀ q`` with the gap of every candidate that holds at ``at`` ≥ 0.
 
+        A least-distance problem in ``y = Lᵀ q`` (``a = L Lᵀ``), solved by Lawson & Hanson's
+        NNLS on a working set of rows — those the last solve pressed and those the
+        unconstrained solution violates — grown by the rows each solution still violates,
+        until none is (the result is then the whole problem's)."""
         q = np.linalg.solve(a, rhs)
         tol = self.settings.contact_tolerance * self.dx_m
         holds = self._rows_at(at)
         rows, bound = self.rows[holds], self.bound[holds]
-        if len(rows) == 0 or np.all(rows @ q >= bound - tol):
+        violated = rows @ q < bound - tol
+        if len(rows) == 0 or not violated.any():
+            self._pressed = np.zeros(0, np.int64)
             return q
         stats["contact_solves"] += 1
-        low = np.linalg.cholesky(a)
-        y0 = solve_triangular(low, rhs, lower=True)
-        h_rows = solve_triangular(low, rows.T, lower=True).T       # G L⁻ᵀ
+        inverse = np.linalg.inv(np.linalg.cholesky(a))          # L⁻¹ (r × r)
+        y0 = inverse @ rhs
+        h_rows = rows @ inverse.T                               # G L⁻ᵀ
         h = bound - h_rows @ y0
-        # Lawson & Hanson's least-distance programming: min |z| with h_rows z ≥ h
-        e = np.vstack([h_rows.T, h[None]])
-        f = np.zeros(len(e))
-        f[-1] = 1.0
-        weights, _ = nnls(e, f, maxiter=50 * e.shape[1])
-        residual = e @ weights - f
-        if abs(residual[-1]) < 1e-12:
-            raise InputError("the reduced model's contacts cannot all be kept", "reduced model")
-        z = -residual[:-1] / residual[-1]
-        return solve_triangular(low.T, y0 + z, lower=False)
+        index = np.flatnonzero(holds)
+        work = violated.copy()
+        work[np.isin(index, getattr(self, "_pressed", ()))] = True
+        for _ in range(len(rows)):
+            z, weights = _least_distance(h_rows[work], h[work])
+            outside = h_rows @ z < h - tol * 1e-3
+            if not (outside & ~work).any():
+                break
+            work |= outside
+        self._pressed = index[np.flatnonzero(work)[weights > 0]]
+        stats["contact_rows_worked"] = max(stats.get("contact_rows_worked", 0), int(work.sum()))
+        return inverse.T @ (y0 + z)
 
     def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> np.ndarray:
         """C_r (r × r) at the voxels' shear rates of the reduced velocity ``qdot`` (Eq. 16)."""
@@ -336,6 +341,22 @@ class ReducedCreep:
         force = np.interp(times, st_t, np.array(saved_f))
         stats.update(seconds=time.perf_counter() - started, advance_at_rest_mm=b.advance_at_rest_mm)
         return CreepResult(times, nodes_mm, particles, advance_mm, force, stats)
+
+
+def _least_distance(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The shortest ``z`` with ``g z ≥ h`` and the constraints' NNLS weights (> 0: pressed),
+    by Lawson & Hanson's reduction to non-negative least squares (Solving Least Squares
+    Problems, 1974, ch. 23)."""
+    from scipy.optimize import nnls
+
+    e = np.vstack([g.T, h[None]])
+    f = np.zeros(len(e))
+    f[-1] = 1.0
+    weights, _ = nnls(e, f, maxiter=50 * max(e.shape[1], 1))
+    residual = e @ weights - f
+    if abs(residual[-1]) < 1e-12:
+        raise InputError("the reduced model's contacts cannot all be kept", "reduced model")
+    return -residual[:-1] / residual[-1], weights
 
 
 __all__ = ["ReducedBasis", "ReducedSettings", "ReducedCreep", "pod_basis"]

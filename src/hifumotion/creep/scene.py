@@ -169,4 +169,33 @@ def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Cal
     return sim
 
 
-__all__ = ["simulate_creep", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]
+def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, settings=None,
+                  progress: Callable[[float], None] | None = None):
+    """A :class:`~.reduced.ReducedCreep` of the voxel mesh ``mesh`` whose modes are the motion of
+    full runs of ``scenes`` (the same tissue; other materials, forces): its construction."""
+    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
+
+    settings = settings or ReducedSettings()
+    runs: list[CreepResult] = []
+    for i, scene in enumerate(scenes):
+        tell = None if progress is None else (lambda f, i=i: progress((i + f) / len(scenes)))
+        simulate_creep(scene, tissue_particles=(mesh.centres_mm, tissue_volume_mm3), mesh=mesh, keep=runs,
+                       progress=tell)
+    solver, _ = creep_solver(scenes[0], mesh)
+    return ReducedCreep(solver, pod_basis(runs, settings.energy, settings.max_modes), settings)
+
+
+def simulate_reduced(scene: Scene, reduced, tissue_volume_mm3: np.ndarray,
+                     progress: Callable[[float], None] | None = None) -> SimulationResult:
+    """Run ``scene`` on the reduced model ``reduced`` (:func:`reduced_creep`, made for this
+    scene's tissue and mesh): its material and its bar's force schedule; the result as
+    :func:`simulate_creep`'s."""
+    mesh = reduced.mesh
+    punch, axis = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
+    force, breaks = (punch.force_n, punch.breakpoints_s) if punch is not None else ((lambda t: 0.0), ())
+    result = reduced.run(scene_material(scene), force, breaks, output_times(scene), progress)
+    return simulation_result(scene, mesh, np.asarray(tissue_volume_mm3, float), result,
+                             bar_centres(scene, punch, axis, result), "reduced")
+
+
+__all__ = ["simulate_creep", "reduced_creep", "simulate_reduced", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]

@@ -70,7 +70,9 @@ class ModelSettings:
     tissue_density_kg_m3: float = 1050.0
     rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s); a regularisation, not fitted
     contour_points: int = 64            # size of the point set A
-    integrator: str = "implicit"        # "implicit": the fast path (hifumotion.creep); "explicit": Eq. 8–20 as the paper
+    integrator: str = "implicit"        # "implicit": the fast path (hifumotion.creep); "explicit": Eq. 8–20 as the paper;
+                                        # "reduced": the fast path's POD–Galerkin model (hifumotion.creep.reduced)
+    reduced_span: tuple[float, float] = (0.5, 2.0)   # F/E multiples of the full runs the reduced model's modes come from
 
 
 @dataclass
@@ -86,6 +88,7 @@ class ModelSpec:
     surface_vertices_mm: np.ndarray | None = None   # the reconstructed surface, moved as the particles were
     surface_faces: np.ndarray | None = None
     _voxels: object = field(default=None, repr=False, compare=False)  # the fast path's mesh, made once
+    _reduced: object = field(default=None, repr=False, compare=False)  # (ReducedCreep, the Parameters it was made at)
 
     def voxels(self):
         """The fast path's conforming voxel mesh of the tissue (made on first use, then kept)."""
@@ -103,6 +106,21 @@ class ModelSpec:
     @property
     def spacing_mm(self) -> float:
         return self.scene.particles.spacing_mm
+
+    def reduced(self, k: "Parameters", last_frame: int, progress=None):
+        """The reduced model (:mod:`hifumotion.creep.reduced`) of this spec around ``k``: its modes
+        from full runs at F/E × ``settings.reduced_span`` to ``last_frame`` (made on first use
+        or when asked for other parameters or a longer run, then kept)."""
+        if self._reduced is not None:
+            model, at, frames = self._reduced
+            if at == k and frames >= last_frame:
+                return model
+        from hifumotion.creep.scene import reduced_creep
+
+        scenes = [scene_for(self, k.replaced(force_n=k.force_n * f), last_frame) for f in self.settings.reduced_span]
+        model = reduced_creep(scenes, self.voxels(), self.tissue_volume_mm3, progress=progress)
+        self._reduced = (model, k, last_frame)
+        return model
 
 
 @dataclass
@@ -225,8 +243,14 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -
         sim = simulate_creep(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3), mesh=spec.voxels())
     elif spec.settings.integrator == "explicit":
         sim = simulate(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3))
+    elif spec.settings.integrator == "reduced":
+        from hifumotion.creep.scene import simulate_reduced
+
+        # the modes are made once, around the first parameters asked for (ModelSpec.reduced)
+        made = spec._reduced[1] if spec._reduced is not None else k
+        sim = simulate_reduced(scene, spec.reduced(made, last_frame), spec.tissue_volume_mm3)
     else:
-        raise InputError(f"unknown integrator {spec.settings.integrator!r}; expected implicit or explicit",
+        raise InputError(f"unknown integrator {spec.settings.integrator!r}; expected implicit, explicit or reduced",
                          "integrator")
     rest = sim.tissue_mm[0]
     frames = np.arange(len(sim.times_s))
