@@ -90,6 +90,23 @@ def test_protocols_set_the_schedule_and_the_bar():
     assert twin_config("paper").bar.schedule_times_s is None
 
 
+def test_push_change_changes_the_push_after_the_training_frames_and_setup_does_not_say_so():
+    from hifumotion.errors import InputError
+    from hifumotion.experiment.config import twin_config
+    from hifumotion.experiment.twin import push_shape
+
+    for factor in (0.0, 0.5, 1.8):   # lifted, lowered, raised
+        cfg = twin_config("push_change", {"protocol": {"change_factor": factor, "change_at_s": 6.0}})
+        force = cfg.bar.schedule()
+        assert force(5.9) == pytest.approx(cfg.protocol.peak_force_n)
+        assert force(9.0) == pytest.approx(factor * cfg.protocol.peak_force_n)
+        # the operator's setup.json knows the ramp and the hold, not the change
+        shape = push_shape(cfg.bar, cfg.protocol)
+        assert shape.shape == "ramp_hold" and shape.ramp_s == cfg.bar.ramp_s
+    with pytest.raises(InputError, match="change_at_s"):
+        twin_config("push_change", {"protocol": {"change_at_s": 0.1}})
+
+
 def test_a_piecewise_push_must_make_sense():
     from pydantic import ValidationError
 

@@ -84,11 +84,14 @@ class TruthConfig(ConfigModel):
 class ProtocolConfig(ConfigModel):
     """How the bar pushes; sets the bar's schedule and direction (the preset names a therapy's protocol)."""
 
-    name: Literal["paper", "slow_push", "push_release", "oblique", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; custom: the [bar] section as given")
+    name: Literal["paper", "slow_push", "push_release", "oblique", "push_change", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; push_change: ramp then held, then the operator raises, lowers or lifts the push unannounced (setup.json tells only the ramp and hold); custom: the [bar] section as given")
     peak_force_n: float | None = Field(None, gt=0, description="the largest force in N (default: bar.force_n)")
     ramp_s: float | None = Field(None, ge=0, description="paper/oblique/push_release: duration of the rise in s (default: bar.ramp_s; push_release: 1.5 s)")
     hold_s: float = Field(3.0, ge=0, description="push_release: time held at the peak in s")
     angle_deg: float = Field(25.0, ge=0, lt=60, description="oblique: tilt of the bar from the vertical in degrees (in the x–y plane, pushing towards +x)")
+    change_at_s: float | None = Field(None, gt=0, description="push_change: when the push starts to change, in s (default: 60 % of the run, after the paper's training frames)")
+    change_factor: float = Field(1.6, ge=0, le=5, description="push_change: the force after the change over the force before (0: the bar lifted; below 1: lowered; above 1: raised)")
+    change_ramp_s: float = Field(0.3, ge=0, description="push_change: how long the change takes, in s")
 
 
 def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
@@ -104,6 +107,16 @@ def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
     bar.update(force_n=peak, schedule_times_s=None, schedule_force_n=None, direction=(0.0, -1.0, 0.0))
     if p.name in ("paper", "oblique"):
         bar["ramp_s"] = p.ramp_s if p.ramp_s is not None else cfg.bar.ramp_s
+    elif p.name == "push_change":
+        ramp = p.ramp_s if p.ramp_s is not None else cfg.bar.ramp_s
+        at = p.change_at_s if p.change_at_s is not None else 0.6 * end
+        if not ramp < at < end:
+            raise InputError(f"must lie between the ramp's end ({ramp:g} s) and the run's "
+                             f"({end:g} s), got {at:g}", "protocol.change_at_s")
+        done = min(at + p.change_ramp_s, end) if p.change_ramp_s > 0 else at + 1e-6
+        # the announced part (a ramp, then held) is bar.ramp_s and force_n: setup.json's push
+        bar.update(ramp_s=ramp, schedule_times_s=[0.0, ramp, at, done],
+                   schedule_force_n=[0.0, peak, peak, peak * p.change_factor])
     elif p.name == "slow_push":
         bar.update(schedule_times_s=[0.0, end], schedule_force_n=[0.0, peak])
     elif p.name == "push_release":
@@ -154,10 +167,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 # the therapy protocols (issue 19), each on the demo's resolution
 for _name, _extra in (("paper", {}), ("slow_push", {"peak_force_n": 1.0}), ("push_release", {"peak_force_n": 0.6}),
-                      ("oblique", {"peak_force_n": 0.5})):
+                      ("oblique", {"peak_force_n": 0.5}), ("push_change", {"peak_force_n": 0.5})):
     PRESETS[_name] = {**PRESETS["demo"], "protocol": {"name": _name, **_extra}}
 
-Preset = Literal["default", "small", "demo", "paper", "slow_push", "push_release", "oblique"]
+Preset = Literal["default", "small", "demo", "paper", "slow_push", "push_release", "oblique", "push_change"]
 
 
 def _merge(base: dict, extra: dict) -> dict:

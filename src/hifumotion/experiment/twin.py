@@ -102,9 +102,10 @@ def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float, height_
                       write_vtu=True, vtu_every=cfg.run.particle_frames_every))
 
 
-def push_shape(bar) -> PushSchedule:
-    """The shape of the bar's schedule, for ``setup.json`` (its magnitude is not the operator's to know)."""
-    if bar.schedule_times_s is None:
+def push_shape(bar, protocol=None) -> PushSchedule:
+    """The shape of the bar's schedule, for ``setup.json`` (its magnitude is not the operator's to know;
+    nor, under ``push_change``, the change: only the ramp and hold announced)."""
+    if bar.schedule_times_s is None or (protocol is not None and protocol.name == "push_change"):
         return PushSchedule(shape="ramp_hold", ramp_s=bar.ramp_s)
     peak = max(bar.schedule_force_n)
     return PushSchedule(shape="piecewise_linear", times_s=list(bar.schedule_times_s),
@@ -281,7 +282,7 @@ def operator_setup(cfg: TwinConfig, probe: im.Probe, tip_mm: np.ndarray, axis: n
                      direction=tuple(np.asarray(axis).tolist()), tip_at_rest_mm=tuple(np.asarray(tip_mm).tolist())
                      if cfg.bar.enabled else tuple(0.5 * np.asarray(cfg.tank.size_mm)),
                      weight_supported=cfg.bar.weight_supported),
-        push=push_shape(cfg.bar))
+        push=push_shape(cfg.bar, cfg.protocol))
 
 
 def echo_maps(cfg: TwinConfig, probe: im.Probe, tip_mm: np.ndarray, axis: np.ndarray,
