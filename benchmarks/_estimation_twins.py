@@ -1,4 +1,4 @@
-"""The twins issue 19's benchmark scores on: one per therapy protocol, none the defaults.
+"""The twins issue 19's and 39's benchmarks score on: one per therapy protocol, none the defaults.
 
 Each is a protocol preset (the demo's resolution: 0.3 mm pixels, 200 frames at 20 Hz,
 finite-element truth) with its own seed, shape, bar, material and push. They were
@@ -44,6 +44,21 @@ CASES: dict[str, tuple[str, dict]] = {
         "tissue": {"youngs_modulus_pa": 8000.0, "beta2": 0.55},
         "bar": {"radius_mm": 5.5},
         "protocol": {"peak_force_n": 0.6, "angle_deg": 20.0},
+    }),
+    # issue 39: the push changes after the training frames, unannounced
+    "push_change_s45": ("push_change", {
+        "seed": 45,
+        "blob": {"size_mm": [27.0, 17.0, 23.0], "lobes": 5, "irregularity": 0.12},
+        "tissue": {"youngs_modulus_pa": 11000.0, "poisson_ratio": 0.47, "beta1": 6.5e5},
+        "bar": {"radius_mm": 5.0},
+        "protocol": {"peak_force_n": 0.45, "change_at_s": 6.3, "change_factor": 1.8},
+    }),
+    "push_change_s46": ("push_change", {
+        "seed": 46,
+        "blob": {"size_mm": [31.0, 18.0, 21.0], "lobes": 6, "irregularity": 0.16},
+        "tissue": {"youngs_modulus_pa": 9000.0, "poisson_ratio": 0.45, "beta1": 4.5e5, "beta2": 0.45},
+        "bar": {"radius_mm": 6.0},
+        "protocol": {"peak_force_n": 0.55, "change_at_s": 5.7, "change_factor": 0.3, "change_ramp_s": 0.4},
     }),
 }
 

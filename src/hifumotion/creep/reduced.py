@@ -173,7 +173,9 @@ class ReducedCreep:
             blocks[dis] = np.matmul(ve[dis].transpose(0, 2, 1), np.matmul(m.visc, ve[dis]))
         self.viscous = blocks.reshape(len(elements), -1)
         # each particle moves by its voxel corners' mean displacement (VoxelMesh.particles)
-        self.particle_modes_mm = ve.reshape(len(elements), 8, 3, -1).mean(axis=1) / MM   # (voxels, 3, r)
+        # (3 × voxels, r): a frame's particles are one matrix product away
+        self.particle_modes_mm = np.ascontiguousarray(ve.reshape(len(elements), 8, 3, -1).mean(axis=1).reshape(
+            3 * len(elements), -1) / MM)
         self.settled_particles_mm = self.mesh.particles(basis.settled_nodes_mm)
         self.rows, self.bound, self._face = self._contact_rows(solver.contacts)
 
@@ -336,7 +338,7 @@ class ReducedCreep:
         st_t, st_q = np.array(saved_t), np.array(saved_q)
         qs = np.stack([np.interp(times, st_t, st_q[:, k]) for k in range(r)], axis=1)   # (frames, r)
         nodes_mm = b.settled_nodes_mm[None] + (qs @ b.node_modes_m.T).reshape(len(times), -1, 3) / MM
-        particles = self.settled_particles_mm[None] + np.einsum("ekr,fr->fek", self.particle_modes_mm, qs)
+        particles = self.settled_particles_mm[None] + (qs @ self.particle_modes_mm.T).reshape(len(times), -1, 3)
         advance_mm = (qs - qs[:1]) @ b.advance_modes_m / MM
         force = np.interp(times, st_t, np.array(saved_f))
         stats.update(seconds=time.perf_counter() - started, advance_at_rest_mm=b.advance_at_rest_mm)
