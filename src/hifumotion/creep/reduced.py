@@ -171,7 +171,10 @@ class ReducedCreep:
         blocks[reg] = np.matmul(ve[reg].transpose(0, 2, 1), np.matmul(m.cube.viscous, ve[reg]))
         if len(dis):
             blocks[dis] = np.matmul(ve[dis].transpose(0, 2, 1), np.matmul(m.visc, ve[dis]))
-        self.viscous = blocks.reshape(len(elements), -1)
+        # the blocks are symmetric: their upper triangles, in single precision (the sum over the
+        # voxels streams them once a step; 10⁻⁷ of C_r is far below the step's error)
+        self._upper = np.triu_indices(v.shape[1])
+        self.viscous = np.ascontiguousarray(blocks[:, self._upper[0], self._upper[1]], np.float32)
         # each particle moves by its voxel corners' mean displacement (VoxelMesh.particles)
         # (3 × voxels, r): a frame's particles are one matrix product away
         self.particle_modes_mm = np.ascontiguousarray(ve.reshape(len(elements), 8, 3, -1).mean(axis=1).reshape(
@@ -266,16 +269,21 @@ class ReducedCreep:
     def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> np.ndarray:
         """C_r (r × r) at the voxels' shear rates of the reduced velocity ``qdot`` (Eq. 16)."""
         velocity = (self.basis.node_modes_m @ qdot).reshape(-1, 3)
-        mu = material.viscosity(self.matrices.rates(velocity))
+        mu = material.viscosity(self.matrices.rates(velocity)).astype(np.float32)
         r = len(qdot)
-        return (mu @ self.viscous).reshape(r, r)
+        c = np.empty((r, r))
+        c[self._upper] = mu @ self.viscous
+        c.T[self._upper] = c[self._upper]
+        return c
 
     def run(self, material: CreepMaterial, force_n: Callable[[float], float], breakpoints_s: Sequence[float],
-            output_times_s: np.ndarray, progress: Callable[[float], None] | None = None) -> CreepResult:
+            output_times_s: np.ndarray, progress: Callable[[float], None] | None = None,
+            nodes: bool = True) -> CreepResult:
         """Push from the settled state: ``force_n(t)`` (N) on the bar; frames at ``output_times_s``.
 
         Returns the full model's :class:`~.integrate.CreepResult` (nodes, particles, the
-        bar's advance and force at every frame).
+        bar's advance and force at every frame); ``nodes=False`` leaves the nodes out (none
+        of the particles' consumers needs them; they cost as much again).
         """
         started = time.perf_counter()
         times = np.asarray(output_times_s, float)
@@ -337,7 +345,8 @@ class ReducedCreep:
                 progress(min(t / times[-1], 1.0))
         st_t, st_q = np.array(saved_t), np.array(saved_q)
         qs = np.stack([np.interp(times, st_t, st_q[:, k]) for k in range(r)], axis=1)   # (frames, r)
-        nodes_mm = b.settled_nodes_mm[None] + (qs @ b.node_modes_m.T).reshape(len(times), -1, 3) / MM
+        nodes_mm = (b.settled_nodes_mm[None] + (qs @ b.node_modes_m.T).reshape(len(times), -1, 3) / MM if nodes
+                    else np.zeros((len(times), 0, 3)))
         particles = self.settled_particles_mm[None] + (qs @ self.particle_modes_mm.T).reshape(len(times), -1, 3)
         advance_mm = (qs - qs[:1]) @ b.advance_modes_m / MM
         force = np.interp(times, st_t, np.array(saved_f))
