@@ -276,6 +276,48 @@ class ReducedCreep:
         c.T[self._upper] = c[self._upper]
         return c
 
+    def loads(self, material: CreepMaterial) -> "ReducedLoads":
+        """The material's reduced stiffness and its loads at q = 0 (the weight, less u₀'s elastic force)."""
+        lam, g = material.lame()
+        kappa = lam + 2 * g / 3
+        return ReducedLoads(material, 2 * g * self.deviatoric + kappa * self.volumetric + self.anchor,
+                            self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric)
+
+    def settle(self, loads: "ReducedLoads", force_n: float, stats: dict | None = None) -> "ReducedState":
+        """Frame 0: static equilibrium under the weight and the bar's ``force_n`` (N) in this
+        material (the snapshots' settled state u₀ was another material's)."""
+        stats = _counters(self) if stats is None else stats
+        r = self.basis.size
+        q = self._solve(loads.stiffness, loads.load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
+        qdot = np.zeros(r)
+        visc = self._viscosity(loads.material, qdot) if loads.material.beta1 > 0 else np.zeros((r, r))
+        return ReducedState(0.0, q, qdot, visc)
+
+    def step(self, state: "ReducedState", loads: "ReducedLoads", dt: float, force_n: float,
+             stats: dict | None = None) -> tuple["ReducedState", float]:
+        """One backward-Euler step of ``dt`` (s) from ``state`` with the bar's ``force_n`` (N) at its
+        end; the new state and the step's local error (m, ½ Δt max |u̇₊ − u̇| over the nodes)."""
+        stats = _counters(self) if stats is None else stats
+        q, qdot, visc = state.q, state.qdot, state.viscous
+        a = loads.stiffness + visc / dt + self.mass / dt ** 2
+        rhs = (loads.load + force_n * self.basis.advance_modes_m + self.mass @ (q + dt * qdot) / dt ** 2
+               + visc @ q / dt)
+        qnew = self._solve(a, rhs, stats, q)
+        qdot_new = (qnew - q) / dt
+        err = 0.5 * dt * float(np.abs(self.basis.node_modes_m @ (qdot_new - qdot)).max())
+        return ReducedState(state.t_s + dt, qnew, qdot_new, visc), err
+
+    def lag_viscosity(self, state: "ReducedState", loads: "ReducedLoads") -> "ReducedState":
+        """``state`` with Eq. 16's μ from its own rates, for the next step (lagged, as the full model)."""
+        if loads.material.beta1 <= 0:
+            return state
+        return ReducedState(state.t_s, state.q, state.qdot, self._viscosity(loads.material, state.qdot))
+
+    def particles_mm(self, qs: np.ndarray) -> np.ndarray:
+        """``(frames, N, 3)`` particle positions (mm) of the reduced coordinates ``qs`` ``(frames, r)``."""
+        qs = np.atleast_2d(qs)
+        return self.settled_particles_mm[None] + (qs @ self.particle_modes_mm.T).reshape(len(qs), -1, 3)
+
     def run(self, material: CreepMaterial, force_n: Callable[[float], float], breakpoints_s: Sequence[float],
             output_times_s: np.ndarray, progress: Callable[[float], None] | None = None,
             nodes: bool = True) -> CreepResult:
@@ -289,69 +331,78 @@ class ReducedCreep:
         times = np.asarray(output_times_s, float)
         if times.ndim != 1 or len(times) == 0 or np.any(np.diff(times) <= 0) or times[0] < 0:
             raise InputError("output times must be increasing and ≥ 0 s", "output_times_s")
-        lam, g = material.lame()
         st = self.settings
         b = self.basis
         r = b.size
-        kappa = lam + 2 * g / 3
-        stiffness = 2 * g * self.deviatoric + kappa * self.volumetric + self.anchor
-        # u = u₀ + V q: the loads at q = 0 — the weight, less the elastic force of u₀
-        load = self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric
+        loads = self.loads(material)
         f0 = float(force_n(0.0))
-        stats = {"steps": 0, "rejected": 0, "modes": r, "contact_solves": 0, "contact_rows": len(self.rows)}
-        # frame 0: static equilibrium under the weight and F(0) in this material (the snapshots'
-        # settled state u₀ was another material's)
-        q = self._solve(stiffness, load + f0 * b.advance_modes_m, stats, np.zeros(r))
-        qdot = np.zeros(r)
-        t = 0.0
+        stats = _counters(self)
+        state = self.settle(loads, f0, stats)
         interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)
         base = st.first_step_s or interval / 4.0
         level = 0
         breaks = sorted(x for x in breakpoints_s if x > 0) + [times[-1]]
-        saved_t, saved_q, saved_f = [0.0], [q.copy()], [f0]
-        visc = np.zeros((r, r)) if material.beta1 <= 0 else self._viscosity(material, qdot)
+        saved_t, saved_q, saved_f = [0.0], [state.q.copy()], [f0]
         calm = 0
         limit = st.tolerance * self.dx_m
-        while t < times[-1] - 1e-12:
+        while state.t_s < times[-1] - 1e-12:
+            t = state.t_s
             dt = min(base * 2.0 ** level, st.max_step_s)
             nxt = next(x for x in breaks if x > t + 1e-12)
             landing = t + dt >= nxt - 1e-9 * dt
             if landing:
                 dt = nxt - t
             force = float(force_n(t + dt))
-            a = stiffness + visc / dt + self.mass / dt ** 2
-            rhs = load + force * b.advance_modes_m + self.mass @ (q + dt * qdot) / dt ** 2 + visc @ q / dt
-            qnew = self._solve(a, rhs, stats, q)
-            qdot_new = (qnew - q) / dt
-            err = 0.5 * dt * np.abs(b.node_modes_m @ (qdot_new - qdot)).max()
+            new, err = self.step(state, loads, dt, force, stats)
             if err > 2.0 * limit and dt > 1e-6 * base and not (t == 0.0 and level < -12):
                 stats["rejected"] += 1
                 level -= 1
                 calm = 0
                 continue
             stats["steps"] += 1
-            t += dt
-            q, qdot = qnew, qdot_new
-            if material.beta1 > 0:
-                visc = self._viscosity(material, qdot)   # Eq. 16's μ from this step's rates (lagged, as the full model)
-            saved_t.append(t)
-            saved_q.append(q.copy())
+            state = self.lag_viscosity(new, loads)
+            saved_t.append(state.t_s)
+            saved_q.append(state.q.copy())
             saved_f.append(force)
             calm = calm + 1 if err < 0.25 * limit else 0
             if calm >= 2 and not landing:
                 level += 1
                 calm = 0
             if progress is not None:
-                progress(min(t / times[-1], 1.0))
+                progress(min(state.t_s / times[-1], 1.0))
         st_t, st_q = np.array(saved_t), np.array(saved_q)
         qs = np.stack([np.interp(times, st_t, st_q[:, k]) for k in range(r)], axis=1)   # (frames, r)
         nodes_mm = (b.settled_nodes_mm[None] + (qs @ b.node_modes_m.T).reshape(len(times), -1, 3) / MM if nodes
                     else np.zeros((len(times), 0, 3)))
-        particles = self.settled_particles_mm[None] + (qs @ self.particle_modes_mm.T).reshape(len(times), -1, 3)
         advance_mm = (qs - qs[:1]) @ b.advance_modes_m / MM
         force = np.interp(times, st_t, np.array(saved_f))
         stats.update(seconds=time.perf_counter() - started, advance_at_rest_mm=b.advance_at_rest_mm)
-        return CreepResult(times, nodes_mm, particles, advance_mm, force, stats)
+        return CreepResult(times, nodes_mm, self.particles_mm(qs), advance_mm, force, stats)
+
+
+@dataclass(frozen=True)
+class ReducedLoads:
+    """A material's reduced stiffness (N/m per unit q²) and its loads at q = 0 (N per unit q)."""
+
+    material: CreepMaterial
+    stiffness: np.ndarray
+    load: np.ndarray
+
+
+@dataclass(frozen=True)
+class ReducedState:
+    """Where the reduced model is: time (s), coordinates q, their rate (1/s) and the viscosity
+    C_r (N·s/m per unit q²) the next step takes (Eq. 16 at the last step's rates)."""
+
+    t_s: float
+    q: np.ndarray
+    qdot: np.ndarray
+    viscous: np.ndarray
+
+
+def _counters(model: ReducedCreep) -> dict:
+    return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0,
+            "contact_rows": len(model.rows)}
 
 
 def _least_distance(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -370,4 +421,4 @@ def _least_distance(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return -residual[:-1] / residual[-1], weights
 
 
-__all__ = ["ReducedBasis", "ReducedSettings", "ReducedCreep", "pod_basis"]
+__all__ = ["ReducedBasis", "ReducedSettings", "ReducedCreep", "ReducedLoads", "ReducedState", "pod_basis"]
