@@ -286,7 +286,7 @@ class ReducedCreep:
     def settle(self, loads: "ReducedLoads", force_n: float, stats: dict | None = None) -> "ReducedState":
         """Frame 0: static equilibrium under the weight and the bar's ``force_n`` (N) in this
         material (the snapshots' settled state u₀ was another material's)."""
-        stats = _counters(self) if stats is None else stats
+        stats = step_counters(self) if stats is None else stats
         r = self.basis.size
         q = self._solve(loads.stiffness, loads.load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
         qdot = np.zeros(r)
@@ -297,7 +297,7 @@ class ReducedCreep:
              stats: dict | None = None) -> tuple["ReducedState", float]:
         """One backward-Euler step of ``dt`` (s) from ``state`` with the bar's ``force_n`` (N) at its
         end; the new state and the step's local error (m, ½ Δt max |u̇₊ − u̇| over the nodes)."""
-        stats = _counters(self) if stats is None else stats
+        stats = step_counters(self) if stats is None else stats
         q, qdot, visc = state.q, state.qdot, state.viscous
         a = loads.stiffness + visc / dt + self.mass / dt ** 2
         rhs = (loads.load + force_n * self.basis.advance_modes_m + self.mass @ (q + dt * qdot) / dt ** 2
@@ -336,7 +336,7 @@ class ReducedCreep:
         r = b.size
         loads = self.loads(material)
         f0 = float(force_n(0.0))
-        stats = _counters(self)
+        stats = step_counters(self)
         state = self.settle(loads, f0, stats)
         interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)
         base = st.first_step_s or interval / 4.0
@@ -400,7 +400,8 @@ class ReducedState:
     viscous: np.ndarray
 
 
-def _counters(model: ReducedCreep) -> dict:
+def step_counters(model: ReducedCreep) -> dict:
+    """The counters a run or a loop of steps keeps (steps, rejected, contact solves)."""
     return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0,
             "contact_rows": len(model.rows)}
 
@@ -421,4 +422,4 @@ def _least_distance(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return -residual[:-1] / residual[-1], weights
 
 
-__all__ = ["ReducedBasis", "ReducedSettings", "ReducedCreep", "ReducedLoads", "ReducedState", "pod_basis"]
+__all__ = ["ReducedBasis", "ReducedSettings", "ReducedCreep", "ReducedLoads", "ReducedState", "pod_basis", "step_counters"]
