@@ -325,6 +325,19 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     # existing output is never overwritten without --overwrite
     again = subprocess.run(cli + ["predict", str(cal), "-o", str(pred)], capture_output=True, text=True)
     assert again.returncode == 2 and "overwrite" in (again.stdout + again.stderr)
+    # the online loop: the cine replayed frame by frame, a row per frame and horizon, a latency each
+    live = tmp_path / "online"
+    out = subprocess.run(cli + ["online", str(cal), str(folder / "observed"), "-o", str(live), "--horizons", "1,2"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr + out.stdout
+    rows = np.genfromtxt(live / "online.csv", delimiter=",", names=True)
+    assert len(rows) == 2 * 39 and set(rows["horizon_frames"]) == {1, 2} and np.all(rows["latency_ms"] > 0)
+    report = json.loads((live / "online.json").read_text())
+    assert report["frames"] == 39 and set(report["horizons"]) == {"1", "2"}
+    assert (live / "online.png").is_file() and (live / "run_info.json").is_file()
+    bad = subprocess.run(cli + ["online", str(cal), str(folder / "observed"), "-o", str(tmp_path / "x"),
+                                "--horizons", "0"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "--horizons" in bad.stderr + bad.stdout and "Traceback" not in bad.stderr
 
 
 def test_the_displacement_objective_is_the_weighted_difference_of_the_points_motion():

@@ -185,4 +185,17 @@ def particle_observation(model: ReducedCreep, particles: np.ndarray, axes: np.nd
     return np.einsum("pkr,ak->par", modes, np.asarray(axes, float)).reshape(-1, model.basis.size)
 
 
-__all__ = ["AssimilationSettings", "FrameEstimate", "OnlineAssimilator", "particle_observation"]
+def points_observation(model: ReducedCreep, points_mm: np.ndarray, axes: np.ndarray, spacing_mm: float) -> np.ndarray:
+    """``(len(points) · len(axes), r)``: the displacement (m per unit q) of material points
+    ``points_mm`` (``(M, 3)``, where they are at frame 0: the contour points A) along the unit
+    ``axes``, point by point — the model's particles' displacement carried to them by
+    :func:`~hifumotion.particles.section.material_weights` (as :func:`~hifumotion.estimation.model.run_model`)."""
+    from hifumotion.particles.section import material_weights
+
+    r = model.basis.size
+    phi, _ = material_weights(np.asarray(points_mm, float), model.settled_particles_mm, spacing_mm)
+    moved = (phi @ model.particle_modes_mm.reshape(-1, 3 * r)).reshape(-1, 3, r) * MM
+    return np.einsum("pkr,ak->par", moved, np.asarray(axes, float)).reshape(-1, r)
+
+
+__all__ = ["AssimilationSettings", "FrameEstimate", "OnlineAssimilator", "particle_observation", "points_observation"]

@@ -142,4 +142,41 @@ def online_horizons(online: dict, path: str | Path) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["mesh_picture", "dsc_per_frame", "aim_trajectory", "online_horizons"]
+__all__ = ["mesh_picture", "dsc_per_frame", "aim_trajectory", "online_horizons", "online_figure"]
+
+
+def online_figure(result, path: str | Path, truth_mm: np.ndarray | None = None) -> Path:
+    """The online loop (:class:`~hifumotion.prediction.online.OnlineResult`): the predicted
+    centroid at t + k (longest horizon) against the tracked (and the true, where known) one over
+    time, the push's estimated scale, and the histogram of each frame's latency."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(12.0, 3.4))
+    dt = result.frame_interval_s
+    k = max(result.predicted_mm)
+    times = np.arange(len(result.tracked_mm)) * dt
+    target = (result.frames + k) * dt
+    origin = result.tracked_mm[0]
+    for c, style in ((0, "-"), (1, "--")):
+        axis = "x" if c == 0 else "y (depth)"
+        axes[0].plot(target, result.predicted_mm[k][:, c] - origin[c], color=COLOURS["physics"], ls=style,
+                     label=f"predicted {k} frames ahead, {axis}")
+        axes[0].plot(times, result.tracked_mm[:, c] - origin[c], color="0.4", ls=style, label=f"tracked, {axis}")
+        if truth_mm is not None:
+            t = np.asarray(truth_mm, float)
+            axes[0].plot(times[:len(t)], t[:, c] - t[0, c], color=COLOURS["truth"], ls=style, label=f"true, {axis}")
+    axes[0].set_xlabel("time (s)")
+    axes[0].set_ylabel("centroid shift from frame 0 (mm)")
+    axes[0].legend(fontsize=6)
+    axes[0].grid(alpha=0.3)
+    axes[1].plot(result.frames * dt, result.scale, color=COLOURS["physics"])
+    axes[1].fill_between(result.frames * dt, result.scale - result.scale_std, result.scale + result.scale_std,
+                         color=COLOURS["physics"], alpha=0.2)
+    axes[1].set_xlabel("time (s)")
+    axes[1].set_ylabel("push / calibrated push")
+    axes[1].grid(alpha=0.3)
+    axes[2].hist(result.latency_ms + result.tracking_ms_per_frame, bins=30, color=COLOURS["physics"])
+    axes[2].set_xlabel("latency a frame, tracking included (ms)")
+    axes[2].set_ylabel("frames")
+    axes[2].grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
