@@ -152,9 +152,12 @@ def online(
     from hifumotion.report.figures import online_figure
     from hifumotion.run_info import RunRecord
 
-    spec, k, _, meta = load_calibration(calibration_dir)
+    spec, k, reference, meta = load_calibration(calibration_dir)
     observed = load_observed(observed_dir)
     n = len(observed.frames)
+    if tuple(observed.frames.shape[1:]) != tuple(reference.plane.shape):
+        raise InputError(f"its frames are {observed.frames.shape[1:]} pixels, the calibration's "
+                         f"{tuple(reference.plane.shape)}: not the experiment that was calibrated", observed_dir)
     try:
         ahead = sorted({int(h) for h in horizons.split(",") if h.strip()})
     except ValueError:
