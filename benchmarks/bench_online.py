@@ -42,9 +42,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
+
+# one core, as the targets say: BLAS's threads would only fight over the reduced model's small products
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import numpy as np
 
@@ -117,26 +122,16 @@ def run_twin(twin: Path, particles: int) -> dict:
             "targets": targets}
 
 
-def _polygon_centroid(points: np.ndarray) -> np.ndarray:
-    """Area centroid of a closed polygon ``(M, 2)``."""
-    x, y = points[:, 0], points[:, 1]
-    xs, ys = np.roll(x, -1), np.roll(y, -1)
-    cross = x * ys - xs * y
-    area = cross.sum() / 2
-    return np.array([((x + xs) * cross).sum(), ((y + ys) * cross).sum()]) / (6 * area)
-
-
 def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
     from bench_estimation import _twin_settings, observe
 
     from hifumotion.creep.linear import set_threads
-    from hifumotion.creep.scene import scene_material
-    from hifumotion.estimation.model import ModelSettings, Parameters, model_spec, run_model, scene_for
+    from hifumotion.estimation.model import ModelSettings, Parameters, model_spec, run_model
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.experiment.config import ImagingConfig
     from hifumotion.metrics import centroid
-    from hifumotion.prediction.assimilate import OnlineAssimilator, points_observation
     from hifumotion.prediction.baselines import kalman_predict
+    from hifumotion.prediction.online import online_loop, polygon_centroid
     from hifumotion.scoring import read_frame_masks
 
     imaging = ImagingConfig(**_twin_settings(twin)["imaging"])
@@ -152,58 +147,39 @@ def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
     implicit = model_spec(obs, ModelSettings(tissue_particles=particles))
     reduced = model_spec(obs, ModelSettings(tissue_particles=particles, integrator="reduced"))
     reduced._voxels = implicit.voxels()
-    t0 = time.perf_counter()
-    model = reduced.reduced(k, last)
-    build_s = time.perf_counter() - t0
+    result = online_loop(reduced, k, obs, [ahead])
     offline = run_model(implicit, k, last)          # the announced push, assimilating nothing
     plane = obs.frame_plane
-    scene = scene_for(reduced, k, last)
-    schedule = scene.bar.schedule()
-    h = points_observation(model, reduced.points_mm, np.stack([np.asarray(plane.u, float), np.asarray(plane.v, float)]),
-                           reduced.spacing_mm)
-    series = obs.motion.displacement
-    px = plane.to_pixels(reduced.points_mm)
-    filt = OnlineAssimilator(model, scene_material(scene), schedule, h, dt)
+    axes = np.stack([np.asarray(plane.u, float), np.asarray(plane.v, float)])
+    a0 = (offline.points_mm[0] - np.asarray(plane.origin_mm, float)) @ axes.T
     truth = read_frame_masks(twin / "truth")
     tracked = obs.frame_masks
     pixel = obs.pixel_mm
-    a0 = np.stack([np.asarray(plane.u, float), np.asarray(plane.v, float)]) @ reduced.points_mm.T   # (2, M)
-    c0 = _polygon_centroid(a0.T)
-    true0 = centroid(truth[0], pixel)
-    tracked0 = centroid(tracked[0], pixel)
+    true0, tracked0 = centroid(truth[0], pixel), centroid(tracked[0], pixel)
     errors = {"filter": [], "hold": [], "kalman": [], "offline": []}
-    latency = []
-    scales = []
-    for t in range(1, last - ahead + 1):
-        d, q = series.at(px, t)
-        y = np.where((np.isfinite(d).all(1) & (q > 0))[:, None], d, np.nan).ravel()
-        est = filt.assimilate(y, (ahead,))
-        latency.append(est.latency_ms)
-        scales.append(est.scale)
-        f = t + ahead
+    for i, t in enumerate(result.frames):
+        f = int(t + ahead)
         if t < max(train) or f not in truth:
             continue
         true_shift = centroid(truth[f], pixel) - true0
-        moved = a0.T + est.predicted_mm[ahead].reshape(-1, 2)
-        errors["filter"].append(np.linalg.norm(_polygon_centroid(moved) - c0 - true_shift))
+        errors["filter"].append(np.linalg.norm(result.predicted_mm[ahead][i] - tracked0 - true_shift))
         errors["hold"].append(np.linalg.norm(centroid(tracked[t], pixel) - tracked0 - true_shift))
         history = {g: tracked[g] for g in range(max(0, t - 40), t + 1)}
         kal = kalman_predict(history, [f], dt, pixel)[f]
         errors["kalman"].append(np.linalg.norm(centroid(kal, pixel) - tracked0 - true_shift))
-        off = (offline.points_mm[f] - offline.points_mm[0]) @ np.stack([np.asarray(plane.u, float),
-                                                                         np.asarray(plane.v, float)]).T
-        errors["offline"].append(np.linalg.norm(_polygon_centroid(a0.T + off) - c0 - true_shift))
+        moved = a0 + (offline.points_mm[f] - offline.points_mm[0]) @ axes.T
+        errors["offline"].append(np.linalg.norm(polygon_centroid(moved) - polygon_centroid(a0) - true_shift))
     mean = {name: round(float(np.mean(e)), 4) for name, e in errors.items()}
-    lat = np.array(latency)
-    track_ms = 1000.0 * obs.timings_s.get("track_s", obs.timings_s.get("track", float("nan"))) / n
+    lat = result.latency_ms
+    track_ms = result.tracking_ms_per_frame
     motion = [np.linalg.norm(centroid(truth[f], pixel) - true0) for f in truth if f >= max(train)]
     return {"twin": twin.name, "particles": int(len(reduced.tissue_mm)), "horizon_frames": ahead,
-            "horizon_ms": round(1000 * ahead * dt, 1), "construction_s": round(build_s, 1),
+            "horizon_ms": round(1000 * ahead * dt, 1), "construction_s": round(result.construction_s, 1),
             "true_centroid_motion_after_training_mm": round(float(np.max(motion)), 3),
             "centroid_error_mean_mm": mean,
             "filter_latency_ms": {"median": round(float(np.median(lat)), 2), "p99": round(float(np.percentile(lat, 99)), 2)},
             "tracking_ms_per_frame": round(track_ms, 2),
-            "scale_at_end": round(scales[-1], 3),
+            "scale_at_end": round(float(result.scale[-1]), 3),
             "true_change_factor": _twin_settings(twin)["protocol"].get("change_factor"),
             "targets": {"centroid_0.1mm": mean["filter"] <= 0.1,
                         "half_of_hold_kalman_offline": all(mean["filter"] <= 0.5 * mean[b]

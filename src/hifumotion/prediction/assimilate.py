@@ -129,10 +129,13 @@ class OnlineAssimilator:
         new, _ = self.model.step(state, self.loads, dt, force, self.stats)
         return new
 
-    def assimilate(self, observed_mm: np.ndarray, horizons_frames=()) -> FrameEstimate:
+    def assimilate(self, observed_mm: np.ndarray, horizons_frames=(), quality: np.ndarray | None = None
+                   ) -> FrameEstimate:
         """Frame t + 1: forecast one frame, correct by its tracked displacement ``observed_mm``
         (``(m,)``, mm since frame 0; NaN where tracking saw nothing), predict t + 1 + k for each
-        horizon k (frames)."""
+        horizon k (frames). ``quality`` ``(m,)`` in (0, 1], the tracking's confidence in each
+        coordinate, divides its noise (the speckle tracking's NCC quality: a boundary the image
+        does not show counts for little)."""
         started = time.perf_counter()
         s = self.settings
         y = np.asarray(observed_mm, float).ravel()
@@ -160,7 +163,10 @@ class OnlineAssimilator:
         innovation = y[seen] - self.h[seen] @ (nominal.q - self.q0) / MM
         x = np.append(nominal.q, self.scale)
         if len(innovation):
-            gain_t = np.linalg.solve(h @ cov @ h.T + s.observation_noise_mm ** 2 * np.eye(len(innovation)), h @ cov)
+            sigma = np.full(len(innovation), s.observation_noise_mm)
+            if quality is not None:
+                sigma = sigma / np.clip(np.asarray(quality, float).ravel()[seen], 0.05, 1.0)
+            gain_t = np.linalg.solve(h @ cov @ h.T + np.diag(sigma ** 2), h @ cov)
             x = x + gain_t.T @ innovation
             cov = cov - gain_t.T @ (h @ cov)
         self.cov = 0.5 * (cov + cov.T)

@@ -173,7 +173,7 @@ def online_loop(spec, k, observation, horizons_frames, settings=None, progress=N
         d, q = series.at(px, int(t))
         seen = np.isfinite(d).all(1) & (q > 0)
         y = np.where(seen[:, None], d, np.nan).ravel()
-        est = filt.assimilate(y, horizons)
+        est = filt.assimilate(y, horizons, np.repeat(np.where(seen, q, 1.0), 2))
         for h_ in horizons:
             predicted[h_][i] = base + polygon_centroid(a0 + est.predicted_mm[h_].reshape(-1, 2))
         scale[i], scale_std[i], latency[i] = est.scale, est.scale_std, est.latency_ms
