@@ -126,7 +126,7 @@ class OnlineAssimilator:
 
     def _forecast(self, state: ReducedState, scale: float, dt: float) -> ReducedState:
         force = scale * float(self.schedule(state.t_s + dt))
-        new, _ = self.model.step(state, self.loads, dt, force, self.stats)
+        new, _ = self.model.step(state, self.loads, dt, force, self.stats, error=False)
         return new
 
     def assimilate(self, observed_mm: np.ndarray, horizons_frames=(), quality: np.ndarray | None = None
