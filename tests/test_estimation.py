@@ -449,3 +449,20 @@ def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path
     assert motion > 0
     assert np.abs(saved.run.points_mm - memory.run.points_mm).max() < 1e-3 * motion
     assert dice(saved.masks[frames[0]], memory.masks[frames[0]]) > 0.999
+
+
+def test_model_settings_pick_one_of_the_forward_models_and_keep_their_own_settings_through_json():
+    from dataclasses import asdict
+
+    from hifumotion.estimation.model import FORWARD_MODELS, ModelSettings
+
+    assert set(FORWARD_MODELS) == {"implicit", "explicit", "reduced"}
+    s = ModelSettings(integrator="reduced", creep={"tolerance": 0.01}, reduced={"max_modes": 12})
+    again = ModelSettings(**json.loads(json.dumps(asdict(s))))   # as parameters.json holds them
+    assert again == s and again.creep.tolerance == 0.01 and again.reduced.max_modes == 12
+    with pytest.raises(InputError, match="integrator"):
+        ModelSettings(integrator="implict")
+    with pytest.raises(InputError, match="tolerence"):
+        ModelSettings(creep={"tolerence": 0.01})
+    with pytest.raises(InputError, match="reduced_span"):
+        ModelSettings(reduced_span=(2.0, 0.5))

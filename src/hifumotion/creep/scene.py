@@ -170,9 +170,10 @@ def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Cal
 
 
 def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, settings=None,
-                  progress: Callable[[float], None] | None = None):
+                  progress: Callable[[float], None] | None = None, creep: CreepSettings | None = None):
     """A :class:`~.reduced.ReducedCreep` of the voxel mesh ``mesh`` whose modes are the motion of
-    full runs of ``scenes`` (the same tissue; other materials, forces): its construction."""
+    full runs of ``scenes`` (the same tissue; other materials, forces; ``creep``, their settings):
+    its construction."""
     from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
 
     settings = settings or ReducedSettings()
@@ -180,7 +181,7 @@ def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, sett
     for i, scene in enumerate(scenes):
         tell = None if progress is None else (lambda f, i=i: progress((i + f) / len(scenes)))
         simulate_creep(scene, tissue_particles=(mesh.centres_mm, tissue_volume_mm3), mesh=mesh, keep=runs,
-                       progress=tell)
+                       progress=tell, settings=creep)
     solver, _ = creep_solver(scenes[0], mesh)
     return ReducedCreep(solver, pod_basis(runs, settings.energy, settings.max_modes), settings)
 

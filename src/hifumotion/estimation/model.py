@@ -28,9 +28,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 
+from hifumotion.creep.integrate import CreepSettings
+from hifumotion.creep.reduced import ReducedSettings
 from hifumotion.errors import InputError
 from hifumotion.particles.quasi_static import settling
 from hifumotion.particles.scene import (BYTES_PER_PARTICLE, BarConfig, ParticleConfig, PhysicsConfig, RunConfig,
@@ -70,9 +73,32 @@ class ModelSettings:
     tissue_density_kg_m3: float = 1050.0
     rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s); a regularisation, not fitted
     contour_points: int = 64            # size of the point set A
-    integrator: str = "implicit"        # "implicit": the fast path (hifumotion.creep); "explicit": Eq. 8–20 as the paper;
-                                        # "reduced": the fast path's POD–Galerkin model (hifumotion.creep.reduced)
+    integrator: str = "implicit"        # one of FORWARD_MODELS: "implicit", the fast path (hifumotion.creep);
+                                        # "explicit", Eq. 8–20 as the paper; "reduced", the fast path's
+                                        # POD–Galerkin model (hifumotion.creep.reduced)
     reduced_span: tuple[float, float] = (0.5, 2.0)   # F/E multiples of the full runs the reduced model's modes come from
+    creep: CreepSettings = field(default_factory=CreepSettings)        # the implicit path's (and the snapshots')
+    reduced: ReducedSettings = field(default_factory=ReducedSettings)  # the reduced model's
+
+    def __post_init__(self):
+        if self.integrator not in FORWARD_MODELS:
+            raise InputError(f"unknown integrator {self.integrator!r}; expected {', '.join(FORWARD_MODELS)}",
+                             "integrator")
+        # from parameters.json: the nested settings arrive as dicts
+        for name, kind in (("creep", CreepSettings), ("reduced", ReducedSettings)):
+            value = getattr(self, name)
+            if isinstance(value, dict):
+                unknown = sorted(set(value) - set(kind.__dataclass_fields__))
+                if unknown:
+                    raise InputError(f"unknown settings {unknown}; expected some of "
+                                     f"{sorted(kind.__dataclass_fields__)}", f"model_settings.{name}")
+                setattr(self, name, kind(**value))
+            elif not isinstance(value, kind):
+                raise InputError(f"expected {kind.__name__}, got {type(value).__name__}", f"model_settings.{name}")
+        span = tuple(float(x) for x in self.reduced_span)
+        if len(span) != 2 or not (0 < span[0] < span[1] and np.isfinite(span[1])):
+            raise InputError(f"expected two F/E multiples 0 < low < high, got {self.reduced_span}", "reduced_span")
+        self.reduced_span = span
 
 
 @dataclass
@@ -118,7 +144,8 @@ class ModelSpec:
         from hifumotion.creep.scene import reduced_creep
 
         scenes = [scene_for(self, k.replaced(force_n=k.force_n * f), last_frame) for f in self.settings.reduced_span]
-        model = reduced_creep(scenes, self.voxels(), self.tissue_volume_mm3, progress=progress)
+        model = reduced_creep(scenes, self.voxels(), self.tissue_volume_mm3, self.settings.reduced,
+                              progress=progress, creep=self.settings.creep)
         self._reduced = (model, k, last_frame)
         return model
 
@@ -223,6 +250,42 @@ def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
     return scene
 
 
+class ForwardModel(Protocol):
+    """One integrator of the model: ``(spec, scene, k, last_frame) → SimulationResult`` — the
+    scene (:func:`scene_for`) run from its settled state to ``last_frame``, its tissue particles
+    at every frame. :data:`FORWARD_MODELS` names them; ``ModelSettings.integrator`` picks one."""
+
+    def __call__(self, spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int): ...
+
+
+def _implicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
+    """The fast path (:mod:`hifumotion.creep`) with ``settings.creep``."""
+    from hifumotion.creep.scene import simulate_creep
+
+    return simulate_creep(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3), mesh=spec.voxels(),
+                          settings=spec.settings.creep)
+
+
+def _explicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
+    """The paper's particle framework, Eq. 8–20 (:mod:`hifumotion.particles`)."""
+    from hifumotion.particles.simulate import simulate
+
+    return simulate(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3))
+
+
+def _reduced(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
+    """The reduced model (:mod:`hifumotion.creep.reduced`), its modes made once around the first
+    parameters asked for (:meth:`ModelSpec.reduced`)."""
+    from hifumotion.creep.scene import simulate_reduced
+
+    made = spec._reduced[1] if spec._reduced is not None else k
+    return simulate_reduced(scene, spec.reduced(made, last_frame), spec.tissue_volume_mm3)
+
+
+#: The integrators behind :func:`run_model`, by ``ModelSettings.integrator``.
+FORWARD_MODELS: dict[str, ForwardModel] = {"implicit": _implicit, "explicit": _explicit, "reduced": _reduced}
+
+
 def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -> ModelRun:
     """Simulate frames 0 … ``last_frame`` with ``k``; the points A at every frame.
 
@@ -231,27 +294,12 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -
     validity (ν ≥ 0.5, E ≤ 0 …).
     """
     from hifumotion.particles.section import material_displacement
-    from hifumotion.particles.simulate import simulate
 
     if not (k.youngs_modulus_pa > 0 and -1 < k.poisson_ratio < 0.5 and k.beta1 >= 0):
         raise InputError(f"parameters outside the model's range: {k}", "parameters")
     t0 = time.perf_counter()
     scene = scene_for(spec, k, last_frame)
-    if spec.settings.integrator == "implicit":
-        from hifumotion.creep.scene import simulate_creep
-
-        sim = simulate_creep(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3), mesh=spec.voxels())
-    elif spec.settings.integrator == "explicit":
-        sim = simulate(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3))
-    elif spec.settings.integrator == "reduced":
-        from hifumotion.creep.scene import simulate_reduced
-
-        # the modes are made once, around the first parameters asked for (ModelSpec.reduced)
-        made = spec._reduced[1] if spec._reduced is not None else k
-        sim = simulate_reduced(scene, spec.reduced(made, last_frame), spec.tissue_volume_mm3)
-    else:
-        raise InputError(f"unknown integrator {spec.settings.integrator!r}; expected implicit, explicit or reduced",
-                         "integrator")
+    sim = FORWARD_MODELS[spec.settings.integrator](spec, scene, k, last_frame)
     rest = sim.tissue_mm[0]
     frames = np.arange(len(sim.times_s))
     # the points A are material points: followed with the particles near them at frame 0
@@ -261,4 +309,5 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -
     return ModelRun(k, frames, points, rest, kept, sim.bar_centre_mm, sim.steps, time.perf_counter() - t0)
 
 
-__all__ = ["Parameters", "ModelSettings", "ModelSpec", "ModelRun", "model_spec", "scene_for", "run_model"]
+__all__ = ["Parameters", "ModelSettings", "ModelSpec", "ModelRun", "ForwardModel", "FORWARD_MODELS", "model_spec",
+           "scene_for", "run_model"]
