@@ -91,6 +91,18 @@ def mask_boundaries_px(mask: np.ndarray) -> list[np.ndarray]:
     return [points[a:b] for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()) if b - a >= 3]
 
 
+def polygon_centroid(points: np.ndarray) -> np.ndarray:
+    """Area centroid ``(2,)`` of the closed polygon ``points`` ``(M, 2)`` (its vertices' mean if it has no area)."""
+    p = np.asarray(points, float)
+    x, y = p[:, 0], p[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    a = cross.sum() / 2.0
+    if abs(a) < 1e-12:
+        return p.mean(axis=0)
+    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * a)
+
+
 @dataclass
 class Contour:
     """A closed contour in one image plane.
@@ -154,14 +166,7 @@ class Contour:
     @property
     def centroid_mm(self) -> np.ndarray:
         """Area centroid ``(x_mm, y_mm)`` of the enclosed polygon."""
-        p = self.points_mm
-        x, y = p[:, 0], p[:, 1]
-        xn, yn = np.roll(x, -1), np.roll(y, -1)
-        cross = x * yn - xn * y
-        a = cross.sum() / 2.0
-        if abs(a) < 1e-12:
-            return p.mean(axis=0)
-        return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * a)
+        return polygon_centroid(self.points_mm)
 
     def to_mask(self, shape: tuple[int, int]) -> np.ndarray:
         """Rasterise: ``True`` for every pixel whose centre lies inside the polygon (even-odd rule)."""

@@ -20,18 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hifumotion.contour import polygon_centroid
 from hifumotion.errors import InputError
-
-
-def polygon_centroid(points: np.ndarray) -> np.ndarray:
-    """Area centroid ``(2,)`` of a closed polygon ``(M, 2)`` (its vertices' mean if it has no area)."""
-    x, y = points[:, 0], points[:, 1]
-    xs, ys = np.roll(x, -1), np.roll(y, -1)
-    cross = x * ys - xs * y
-    area = cross.sum() / 2
-    if abs(area) < 1e-12:
-        return points.mean(axis=0)
-    return np.array([((x + xs) * cross).sum(), ((y + ys) * cross).sum()]) / (6 * area)
 
 
 @dataclass
