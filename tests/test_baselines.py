@@ -52,3 +52,22 @@ def test_ncc_finds_a_known_shift_of_speckle():
     frames = np.stack([np.roll(img, (k, -2 * k), axis=(0, 1)) for k in range(4)])
     track = ncc_track(frames, mask)
     assert np.array_equal(track[3], np.roll(mask, (3, -6), axis=(0, 1)))
+
+
+def test_a_margin_within_its_spread_over_the_frames_is_no_win():
+    from conftest import disc
+
+    from hifumotion.prediction.evaluate import margin_over
+
+    frames = list(range(8))
+    truth = {f: disc((60, 60), 20 + f, 30, 10) for f in frames}
+    hold = {f: disc((60, 60), 20, 30, 10) for f in frames}
+    # exactly the truth: better than holding still
+    assert margin_over(truth, hold, truth, 0.2, frames)["verdict"] == "better"
+    # 2 px off on even frames, exact on odd, against a baseline 1 px off on all: no better
+    alternating = {f: disc((60, 60), 20 + f + (2 if f % 2 == 0 else 0), 30, 10) for f in frames}
+    near = {f: disc((60, 60), 21 + f, 30, 10) for f in frames}
+    assert margin_over(alternating, near, truth, 0.2, frames)["verdict"] == "no better"
+    # moving away from the truth: worse than holding still
+    away = {f: disc((60, 60), 20 - 2 * f, 30, 10) for f in frames}
+    assert margin_over(away, hold, truth, 0.2, frames)["verdict"] == "worse"

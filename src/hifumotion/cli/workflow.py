@@ -57,7 +57,7 @@ def demo(
     v = summary
     console.print(f"validation DSC {v['validation_dsc_mean']:.4f} (min {v['validation_dsc_min']:.4f}), centroid error "
                   f"{v['validation_centroid_mean_mm']:.2f} mm; no motion {v['no_motion_validation_dsc_mean']:.4f}, "
-                  f"Kalman {v['kalman_validation_dsc_mean']:.4f}", highlight=False)
+                  f"Kalman {v['kalman_validation_dsc_mean']:.4f}; the physics is {_verdict(v)}", highlight=False)
     console.print(f"open {root / 'report' / 'report.html'} — the report; prediction/tissue.pvd in ParaView; "
                   f"calibration/observation/tissue_volume.nii.gz in 3D Slicer; all in {root}", highlight=False)
 
@@ -92,6 +92,17 @@ def run(
         record.write(out)
     v = summary
     console.print(f"validation DSC {v['validation_dsc_mean']:.4f} (min {v['validation_dsc_min']:.4f}) against the "
-                  f"{v['truth']}; no motion {v['no_motion_validation_dsc_mean']:.4f}", highlight=False)
+                  f"{v['truth']}; no motion {v['no_motion_validation_dsc_mean']:.4f}; the physics is {_verdict(v)}",
+                  highlight=False)
     console.print(f"open {target.resolve() / 'report' / 'report.html'}; all results in {target.resolve()}",
                   highlight=False)
+
+
+def _verdict(summary: dict) -> str:
+    """The physics against holding still, with the margin's spread over the validation frames."""
+    verdict = summary.get("physics_vs_no_motion")
+    if verdict is None:
+        return "not compared with holding still (too few validation frames)"
+    words = {"better": "better than", "worse": "worse than", "no better": "no better than"}[verdict]
+    return (f"{words} holding still (DSC {summary['dsc_margin_over_no_motion']:+.4f} ± "
+            f"{summary['dsc_margin_spread']:.4f} a frame)")

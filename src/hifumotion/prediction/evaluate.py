@@ -37,6 +37,31 @@ def summary(masks: dict, truth: dict, pixel_mm: float, frames) -> dict:
             "centroid_max_mm": float(np.max(c))}
 
 
+def margin_over(masks: dict, baseline: dict, truth: dict, pixel_mm: float, frames) -> dict:
+    """The prediction's margin over a baseline frame by frame: DSC(pred) − DSC(baseline) and
+    centroid error (baseline − pred, mm), each's mean and spread (standard deviation over the
+    frames), and ``verdict``: ``"better"`` when both means are positive and the DSC margin or
+    the centroid margin exceeds its spread, ``"worse"`` when both are negative beyond it,
+    else ``"no better"`` — a margin within its spread is not a win."""
+    from hifumotion.metrics import centroid_distance, dice
+
+    frames = [f for f in frames if f in masks and f in baseline and f in truth and masks[f].any() and baseline[f].any()]
+    if len(frames) < 2:
+        return {"frames": len(frames), "verdict": None}
+    d = np.array([dice(masks[f], truth[f]) - dice(baseline[f], truth[f]) for f in frames])
+    c = np.array([centroid_distance(baseline[f], truth[f], pixel_mm) - centroid_distance(masks[f], truth[f], pixel_mm)
+                  for f in frames])
+    dm, ds, cm, cs = float(d.mean()), float(d.std(ddof=1)), float(c.mean()), float(c.std(ddof=1))
+    if dm > 0 and cm > 0 and (dm > ds or cm > cs):
+        verdict = "better"
+    elif dm < 0 and cm < 0 and (-dm > ds or -cm > cs):
+        verdict = "worse"
+    else:
+        verdict = "no better"
+    return {"frames": len(frames), "dsc_margin_mean": dm, "dsc_margin_std": ds, "centroid_margin_mean_mm": cm,
+            "centroid_margin_std_mm": cs, "verdict": verdict}
+
+
 @dataclass
 class Evaluation:
     """What :func:`evaluate` measured (JSON-ready through :meth:`as_dict`)."""
@@ -86,6 +111,7 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     masks = {"no_motion": hold_last(seen, validation),
              "kalman": kalman_predict(seen, validation, frame_interval_s, pixel)}
     baselines = {name: summary(m, truth, pixel, validation) for name, m in masks.items()}
+    physics["margin_over_no_motion"] = margin_over(pred.masks, masks["no_motion"], truth, pixel, validation)
 
     online: dict = {}
     physics_online: dict = {}
@@ -122,4 +148,4 @@ def online_schedule(training, validation, horizons, n_frames: int, samples: int 
     return now, keep
 
 
-__all__ = ["Evaluation", "evaluate", "summary", "online_schedule"]
+__all__ = ["Evaluation", "evaluate", "summary", "margin_over", "online_schedule"]

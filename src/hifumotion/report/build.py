@@ -263,14 +263,23 @@ def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: 
     truth = truth_masks if truth_masks is not None else {f: observed_masks[f] for f in range(len(observed_masks))}
     v = outcome.evaluation.physics["validation"]
     nm = outcome.evaluation.baselines["no_motion"]
-    won = (v.get("dsc_mean") or 0) > (nm.get("dsc_mean") or 0)
+    margin = outcome.evaluation.physics.get("margin_over_no_motion") or {}
+    verdict = margin.get("verdict")
+    if verdict == "better":
+        claim = ("good", "the physics beats holding the last training contour")
+    elif verdict == "worse":
+        claim = ("bad", "the physics is worse than holding the last training contour")
+    else:
+        claim = ("bad", "the physics is no better than holding the last training contour")
+    spread = (f' (per frame: DSC {fmt(margin.get("dsc_margin_mean"), 4)} ± {fmt(margin.get("dsc_margin_std"), 4)}, '
+              f'centroid {fmt(margin.get("centroid_margin_mean_mm"), 3)} ± {fmt(margin.get("centroid_margin_std_mm"), 3)} mm '
+              f'better than holding; a margin within its spread is no win)') if margin.get("frames") else ""
     intro = [paragraph(inputs.experiment_note)] if inputs.experiment_note else []
     intro.append(
         f'<p>Validation frames {outcome.validation[0]}–{outcome.validation[-1]}: physics DSC mean '
         f'<b>{fmt(v.get("dsc_mean"))}</b> (min {fmt(v.get("dsc_min"))}), centroid error '
         f'{fmt(v.get("centroid_mean_mm"), 3)} mm; no motion {fmt(nm.get("dsc_mean"))} — '
-        f'<span class="{"good" if won else "bad"}">the physics {"beats" if won else "does not beat"} holding the '
-        f'last training contour</span>. Prediction took {fmt(outcome.predict_s, 3)} s, '
+        f'<span class="{claim[0]}">{claim[1]}</span>{spread}. Prediction took {fmt(outcome.predict_s, 3)} s, '
         f'{fmt(outcome.realtime_ratio, 3)}× the validation window\'s duration.</p>')
     sections = []
     if inputs.segmentation:

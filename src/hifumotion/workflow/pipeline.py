@@ -199,10 +199,14 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
 def outcome_summary(o: PipelineOutcome) -> dict:
     """The figures a run records (``run_info.json``) and prints."""
     v = o.evaluation.physics["validation"]
+    margin = o.evaluation.physics.get("margin_over_no_motion") or {}
     out = {"truth": o.truth_kind, "validation_dsc_mean": v.get("dsc_mean"), "validation_dsc_min": v.get("dsc_min"),
            "validation_centroid_mean_mm": v.get("centroid_mean_mm"),
            "no_motion_validation_dsc_mean": o.evaluation.baselines["no_motion"].get("dsc_mean"),
            "kalman_validation_dsc_mean": o.evaluation.baselines["kalman"].get("dsc_mean"),
+           "physics_vs_no_motion": margin.get("verdict"),
+           "dsc_margin_over_no_motion": margin.get("dsc_margin_mean"),
+           "dsc_margin_spread": margin.get("dsc_margin_std"),
            "calibration_runs": o.calibration.runs, "predict_s": o.predict_s,
            "predict_over_realtime": o.realtime_ratio, "parameters": o.calibration.parameters.as_dict()}
     return {k: (round(v, 5) if isinstance(v, float) and np.isfinite(v) else v) for k, v in out.items()}
