@@ -19,7 +19,7 @@ from hifumotion.errors import InputError
 @app.command()
 def demo(
     output: Path = typer.Option(Path("demo-output"), "--output", "-o", help="New output folder."),
-    preset: str = typer.Option("slow_push", "--preset", help="Synthetic experiment: slow_push (the demo's resolution, the force rising all along: minutes), demo (the paper's ramp-and-hold push), paper, push_release, oblique, push_change, small (seconds), default (the paper's resolution; long)."),
+    preset: str = typer.Option("push_change", "--preset", help="Synthetic experiment: push_change (the demo's resolution, the push raised unannounced after the training frames: minutes), slow_push (the force rising all along), demo (the paper's ramp-and-hold push), paper, push_release, oblique, small (seconds), default (the paper's resolution; long)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of the synthetic experiment."),
     dataset: Optional[Path] = typer.Option(None, "--dataset", help="Real images with expert masks (images/, masks/, init.json); default ../shared/data/ddti."),
     images: int = typer.Option(6, "--images", min=1, help="How many images of the dataset to segment."),

@@ -91,7 +91,7 @@ def sweep_dataset(twin, folder: str | Path, planes: int = 4, clicks: int = 8, er
 class DemoSettings:
     """What ``hifumotion demo`` runs (every field has a default)."""
 
-    preset: str = "slow_push"                # twin preset: a moving protocol at the demo's resolution (minutes); small (tests), default (the paper's size)
+    preset: str = "push_change"              # twin preset: the push changed unannounced after the training frames, at the demo's resolution (minutes); small (tests), default (the paper's size)
     seed: int = 0
     dataset: Path | None = None              # real images with expert masks; default ../shared/data/ddti
     dataset_images: int = 6

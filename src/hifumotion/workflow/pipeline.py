@@ -11,7 +11,10 @@ and ``hifumotion run CONFIG.toml`` (on a user's files) share:
 3. **predict** the training and validation frames with the fitted model, the online
    mode's frames and the aim point of every frame → ``prediction/`` (masks, contours,
    ``aim.csv``, ``online.csv``, ``tissue.pvd`` for ParaView);
-4. **score** the physics and the baselines (no motion, Kalman, NCC online) against the
+4. **online loop** (:func:`~hifumotion.prediction.online.online_loop`): the cine frame by
+   frame, each tracked frame assimilated by the reduced model, t + k predicted →
+   ``prediction/online_loop.csv`` (each frame's latency), ``online_loop.json``;
+5. **score** the physics and the baselines (no motion, Kalman, NCC online) against the
    truth — a twin's, or the user's expert masks; without either, against the tracked
    contours, and the report says so → ``scores/`` (Table 4 CSV/JSON, overlays).
 
@@ -59,6 +62,7 @@ class EstimationConfig(ConfigModel):
         "speckle", description="how the time series is observed: frame 0's contour carried by speckle tracking, or GLCV re-segmenting every frame (the paper)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
+    online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
     workers: int | None = Field(None, ge=1, description="Dask worker processes of the local cluster (default: the cores)")
     scheduler_address: str | None = Field(None, description="an existing Dask cluster, tcp://host:8786")
 
@@ -76,6 +80,7 @@ class PipelineOutcome:
     predict_s: float
     folders: dict = field(default_factory=dict)
     truth_parameters: dict | None = None
+    online_loop: object = None      # prediction.online.OnlineResult, when the online loop ran
 
     @property
     def realtime_ratio(self) -> float:
@@ -174,6 +179,17 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
                                 validation, predict_s)
         tell("predict", 1.0)
 
+    live = None
+    if s.online_loop and s.horizons_frames and observation.motion is not None:
+        with stage("online loop"):
+            from hifumotion.prediction.online import online_loop
+
+            horizons = [h for h in s.horizons_frames if 1 <= h < n]
+            if horizons:
+                live = online_loop(cal.spec, cal.parameters, observation, horizons, progress=tell)
+                write_text(folder / "online_loop.csv", live.to_csv())
+                write_json(folder / "online_loop.json", live.summary())
+
     with stage("score"):
         if truth_masks is None:
             truth_masks = {f: observation.frame_masks[f] for f in range(n)}
@@ -192,7 +208,7 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
         overlay_figure(images, truth_masks, pred.masks, training + validation, scores / "overlays.png")
     outcome = PipelineOutcome(cal, pred, ev, truth_kind, training, validation, predict_s,
                               {"calibration": out / "calibration", "prediction": folder, "scores": scores},
-                              truth_parameters)
+                              truth_parameters, live)
     return outcome
 
 
@@ -207,6 +223,9 @@ def outcome_summary(o: PipelineOutcome) -> dict:
            "physics_vs_no_motion": margin.get("verdict"),
            "dsc_margin_over_no_motion": margin.get("dsc_margin_mean"),
            "dsc_margin_spread": margin.get("dsc_margin_std"),
+           "online_loop_latency_with_tracking_ms_median": (o.online_loop.summary()["latency_with_tracking_ms"]["median"]
+                                                           if o.online_loop is not None else None),
+           "online_loop_push_scale_last": float(o.online_loop.scale[-1]) if o.online_loop is not None else None,
            "calibration_runs": o.calibration.runs, "predict_s": o.predict_s,
            "predict_over_realtime": o.realtime_ratio, "parameters": o.calibration.parameters.as_dict()}
     return {k: (round(v, 5) if isinstance(v, float) and np.isfinite(v) else v) for k, v in out.items()}
