@@ -55,10 +55,18 @@ class OnlineResult:
     construction_s: float
     stats: dict = field(default_factory=dict)
 
+    def _actual(self, truth_mm: np.ndarray | None) -> np.ndarray:
+        """The tracked centroids, or the true ones' motion re-anchored on the tracked frame 0 (the
+        error of the motion, not of frame 0's segmentation, which every method shares)."""
+        if truth_mm is None:
+            return self.tracked_mm
+        truth = np.asarray(truth_mm, float)
+        return truth - truth[0] + self.tracked_mm[0]
+
     def errors_mm(self, k: int, truth_mm: np.ndarray | None = None) -> np.ndarray:
         """``(len(frames),)`` |predicted − actual| at t + k (NaN beyond the cine): actual the
-        tracked centroid, or ``truth_mm`` ``(T, 2)`` where given."""
-        actual = self.tracked_mm if truth_mm is None else np.asarray(truth_mm, float)
+        tracked centroid, or the true one's motion (``truth_mm`` ``(T, 2)``, :meth:`_actual`)."""
+        actual = self._actual(truth_mm)
         target = self.frames + k
         out = np.full(len(self.frames), np.nan)
         ok = target < len(actual)
@@ -67,7 +75,7 @@ class OnlineResult:
 
     def hold_errors_mm(self, k: int, truth_mm: np.ndarray | None = None) -> np.ndarray:
         """The same for holding the last tracked frame: |tracked(t) − actual(t + k)|."""
-        actual = self.tracked_mm if truth_mm is None else np.asarray(truth_mm, float)
+        actual = self._actual(truth_mm)
         target = self.frames + k
         out = np.full(len(self.frames), np.nan)
         ok = target < len(actual)

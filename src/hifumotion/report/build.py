@@ -214,8 +214,9 @@ def _online_loop_parts(result, inputs: ReportInputs, folder: Path) -> list[str]:
     return [
         paragraph("Frame by frame, as a scanner would deliver them: the tracked displacement of the contour points "
                   "corrects the reduced model's state and the push's size (an extended Kalman filter), then the "
-                  "section t + k is predicted — the aim before frame t + 1 arrives. Errors are the centroid's, "
-                  "from frame 1 on."),
+                  "section t + k is predicted — the aim before frame t + 1 arrives. Errors are the centroid's "
+                  "motion since frame 0 (against the truth's where it is known, and against the tracking's), "
+                  "from frame 1 on; where the two disagree, the tracking is the one that misses what the bar hides."),
         table(head, rows, "Online loop: centroid error of the prediction against the horizon"),
         paragraph(f"Latency a frame, tracking included: {fmt(lat['median'], 3)} ms at the median, "
                   f"{fmt(lat['p99'], 3)} ms at the 99th percentile (tracking {fmt(s['tracking_ms_per_frame'], 3)} ms "
