@@ -98,7 +98,8 @@ class OnlineAssimilator:
     force_n
         The calibrated push, ``F(t)`` (N at t s, t = 0 at frame 0): the schedule the scale multiplies.
     observation
-        ``(m, r)``: the observed displacement (m) per unit of each reduced coordinate (m).
+        ``(n_observed, r)``: each observed displacement coordinate (metres) per metre of each
+        reduced coordinate (:func:`points_observation`).
     frame_interval_s
         Time between frames (s).
     """
@@ -132,8 +133,8 @@ class OnlineAssimilator:
     def assimilate(self, observed_mm: np.ndarray, horizons_frames=(), quality: np.ndarray | None = None
                    ) -> FrameEstimate:
         """Frame t + 1: forecast one frame, correct by its tracked displacement ``observed_mm``
-        (``(m,)``, mm since frame 0; NaN where tracking saw nothing), predict t + 1 + k for each
-        horizon k (frames). ``quality`` ``(m,)`` in (0, 1], the tracking's confidence in each
+        (``(n_observed,)``, mm since frame 0; NaN where tracking saw nothing), predict t + 1 + k for each
+        horizon k (frames). ``quality`` ``(n_observed,)`` in (0, 1], the tracking's confidence in each
         coordinate, divides its noise (the speckle tracking's NCC quality: a boundary the image
         does not show counts for little)."""
         started = time.perf_counter()
