@@ -70,26 +70,38 @@ def point_error(reduced: np.ndarray, implicit: np.ndarray) -> tuple[float, float
     return float(error.max()), float(motion.max())
 
 
-def run_twin(twin: Path, particles: int) -> dict:
+def _twin_models(twin: Path, particles: int):
+    """The observation ``bench_estimation`` fits and, at the twin's own parameters K, its
+    paper-resolution model on the implicit path and the same model (the same mesh) on the
+    reduced one: ``(observed, observation, training frames, K, implicit spec, reduced spec)``."""
+    from dataclasses import replace
+
     from bench_estimation import _twin_settings, observe
 
     from hifumotion.creep.linear import set_threads
-    from hifumotion.estimation.model import ModelSettings, Parameters, model_spec, run_model
+    from hifumotion.estimation.model import ModelSettings, Parameters, model_spec
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.experiment.config import ImagingConfig
 
     imaging = ImagingConfig(**_twin_settings(twin)["imaging"])
     offset_mm = round(measure_boundary_offset(imaging, "glcv", seed=7919).offset_mm, 3)
-    observed, obs, *_ = observe(twin, "tracked", "speckle", offset_mm)
+    observed, obs, train, *_ = observe(twin, "tracked", "speckle", offset_mm)
     p = json.loads((twin / "truth" / "parameters.json").read_text())
     k = Parameters(p["external_force_n"], p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"])
-    last = len(observed.frames) - 1
-    simulated_s = last * observed.frame_interval_s
     set_threads(1)   # one core, as the issue's targets and the calibration's workers
     implicit = model_spec(obs, ModelSettings(tissue_particles=particles))
-    reduced = model_spec(obs, ModelSettings(tissue_particles=particles, integrator="reduced",
-                                            reduced_span=SNAPSHOT_SCALES))
-    reduced._voxels = implicit.voxels()   # the same mesh (made once)
+    implicit.voxels()   # made once, shared by the reduced spec
+    reduced = replace(implicit, settings=ModelSettings(tissue_particles=particles, integrator="reduced",
+                                                       reduced_span=SNAPSHOT_SCALES))
+    return observed, obs, train, k, implicit, reduced
+
+
+def run_twin(twin: Path, particles: int) -> dict:
+    from hifumotion.estimation.model import run_model
+
+    observed, obs, _, k, implicit, reduced = _twin_models(twin, particles)
+    last = len(observed.frames) - 1
+    simulated_s = last * observed.frame_interval_s
     t0 = time.perf_counter()
     model = reduced.reduced(k, last)
     build_s = time.perf_counter() - t0
@@ -123,30 +135,19 @@ def run_twin(twin: Path, particles: int) -> dict:
 
 
 def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
-    from bench_estimation import _twin_settings, observe
+    from bench_estimation import _twin_settings
 
-    from hifumotion.creep.linear import set_threads
-    from hifumotion.estimation.model import ModelSettings, Parameters, model_spec, run_model
-    from hifumotion.experiment.boundary_offset import measure_boundary_offset
-    from hifumotion.experiment.config import ImagingConfig
+    from hifumotion.estimation.model import run_model
     from hifumotion.metrics import centroid
     from hifumotion.prediction.baselines import kalman_predict
     from hifumotion.prediction.online import online_loop, polygon_centroid
     from hifumotion.scoring import read_frame_masks
 
-    imaging = ImagingConfig(**_twin_settings(twin)["imaging"])
-    offset_mm = round(measure_boundary_offset(imaging, "glcv", seed=7919).offset_mm, 3)
-    observed, obs, train, valid, observe_s, _ = observe(twin, "tracked", "speckle", offset_mm)
-    p = json.loads((twin / "truth" / "parameters.json").read_text())
-    k = Parameters(p["external_force_n"], p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"])
+    observed, obs, train, k, implicit, reduced = _twin_models(twin, particles)
     n = len(observed.frames)
     last = n - 1
     dt = observed.frame_interval_s
     ahead = max(1, int(round(horizon_s / dt)))
-    set_threads(1)
-    implicit = model_spec(obs, ModelSettings(tissue_particles=particles))
-    reduced = model_spec(obs, ModelSettings(tissue_particles=particles, integrator="reduced"))
-    reduced._voxels = implicit.voxels()
     result = online_loop(reduced, k, obs, [ahead])
     offline = run_model(implicit, k, last)          # the announced push, assimilating nothing
     plane = obs.frame_plane

@@ -1,6 +1,7 @@
 """Parameter estimation and prediction: the objective, the estimators, the predicted sections, the CLI."""
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -338,6 +339,14 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     bad = subprocess.run(cli + ["online", str(cal), str(folder / "observed"), "-o", str(tmp_path / "x"),
                                 "--horizons", "0"], capture_output=True, text=True)
     assert bad.returncode == 2 and "--horizons" in bad.stderr + bad.stdout and "Traceback" not in bad.stderr
+    # another experiment's cine (the same image size) is refused, and nothing is written
+    other = tmp_path / "other"
+    shutil.copytree(folder / "observed", other)
+    frame0 = sorted((other / "frames").glob("*.png"))[0]
+    shutil.copyfile(sorted((other / "frames").glob("*.png"))[1], frame0)
+    wrong = subprocess.run(cli + ["online", str(cal), str(other), "-o", str(tmp_path / "y")], capture_output=True,
+                           text=True)
+    assert wrong.returncode == 2 and "frame 0" in wrong.stderr + wrong.stdout and not (tmp_path / "y").exists()
 
 
 def test_the_displacement_objective_is_the_weighted_difference_of_the_points_motion():

@@ -147,6 +147,7 @@ def online(
     from hifumotion.estimation.store import load_calibration
     from hifumotion.io import output_folder, write_json
     from hifumotion.io.files import write_text
+    from hifumotion.estimation.store import frame0_fingerprint
     from hifumotion.observed import load_observed
     from hifumotion.prediction.online import online_loop
     from hifumotion.report.figures import online_figure
@@ -164,6 +165,9 @@ def online(
         raise InputError(f"expected whole frames separated by commas, got {horizons!r}", "--horizons") from None
     if not ahead or ahead[0] < 1 or ahead[-1] >= n:
         raise InputError(f"expected horizons from 1 to {n - 1} frames, got {horizons!r}", "--horizons")
+    if meta.get("observed_frame0_sha256") not in (None, frame0_fingerprint(observed.frames)):
+        raise InputError("its frame 0 is not the calibrated experiment's (parameters.json's "
+                         "observed_frame0_sha256)", observed_dir)
     if abs(observed.frame_interval_s - spec.frame_interval_s) > 1e-9 * spec.frame_interval_s:
         raise InputError(f"the cine's frame interval ({observed.frame_interval_s} s) is not the calibration's "
                          f"({spec.frame_interval_s} s)", observed_dir / "setup.json")

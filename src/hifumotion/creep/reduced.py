@@ -181,6 +181,7 @@ class ReducedCreep:
             3 * len(elements), -1) / MM)
         self.settled_particles_mm = self.mesh.particles(basis.settled_nodes_mm)
         self.rows, self.bound, self._face = self._contact_rows(solver.contacts)
+        self._pressed = np.zeros(0, np.int64)   # the rows the last contact solve pressed (its warm start)
 
     def _contact_rows(self, contacts):
         """Non-penetration of the contact candidates as ``rows @ q ≥ bound`` (m), and the bar
@@ -217,10 +218,10 @@ class ReducedCreep:
         active = np.abs(rows).max(axis=1) > 1e-9 * np.abs(rows).max()
         face = None
         if contacts.punch is not None:
+            # the face's rows come last: their places among the rows kept
             first = len(bound) - len(lateral)
             keep = active[first:]
-            which = np.flatnonzero(active)[np.flatnonzero(active) >= first]
-            position = np.searchsorted(np.flatnonzero(active), which)
+            position = np.arange(int(active[:first].sum()), int(active.sum()))
             face = (position, lateral[keep], lateral_modes[keep], contacts.punch.radius_m)
         return np.ascontiguousarray(rows[active]), bound[active], face
 
@@ -255,7 +256,7 @@ class ReducedCreep:
         h = bound - h_rows @ y0
         index = np.flatnonzero(holds)
         work = violated.copy()
-        work[np.isin(index, getattr(self, "_pressed", ()))] = True
+        work[np.isin(index, self._pressed)] = True
         for _ in range(len(rows)):
             z, weights = _least_distance(h_rows[work], h[work])
             outside = h_rows @ z < h - tol * 1e-3
@@ -289,9 +290,7 @@ class ReducedCreep:
         stats = step_counters(self) if stats is None else stats
         r = self.basis.size
         q = self._solve(loads.stiffness, loads.load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
-        qdot = np.zeros(r)
-        visc = self._viscosity(loads.material, qdot) if loads.material.beta1 > 0 else np.zeros((r, r))
-        return ReducedState(0.0, q, qdot, visc)
+        return self.lag_viscosity(ReducedState(0.0, q, np.zeros(r), np.zeros((r, r))), loads)
 
     def step(self, state: "ReducedState", loads: "ReducedLoads", dt: float, force_n: float,
              stats: dict | None = None, error: bool = True) -> tuple["ReducedState", float]:

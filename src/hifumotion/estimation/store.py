@@ -96,6 +96,7 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
         "description": "Parameters fitted by hifumotion calibrate (SI). 'determined' says whether the training "
                        "frames fix the value; E and β1 are at the nominal force (only F/E and β1/E are seen).",
         "observed": _provenance(observed_dir, folder),
+        "observed_frame0_sha256": frame0_fingerprint(obs.observed.frames),
         "parameters": cal.report(),
         "training_frames": cal.training_frames,
         "frame_interval_s": spec.frame_interval_s,
@@ -128,6 +129,15 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
     }
     write_json(folder / "parameters.json", summary)
     return summary
+
+
+def frame0_fingerprint(frames: np.ndarray) -> str:
+    """SHA-256 of the time series' frame 0 (its pixels and shape): which experiment a calibration
+    belongs to, whatever the folder is called or how many frames followed."""
+    import hashlib
+
+    first = np.ascontiguousarray(frames[0])
+    return hashlib.sha256(repr((first.shape, str(first.dtype))).encode() + first.tobytes()).hexdigest()
 
 
 def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, ReferenceShape, dict]:
@@ -185,4 +195,4 @@ def _surface(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
     return vertices, faces
 
 
-__all__ = ["save_calibration", "load_calibration"]
+__all__ = ["save_calibration", "load_calibration", "frame0_fingerprint"]
