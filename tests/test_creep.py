@@ -308,6 +308,52 @@ def test_the_reduced_model_creeps_by_the_kelvin_voigt_law_under_a_force_its_snap
     assert r.stats["modes"] <= 4
 
 
+def test_the_reduced_model_sticks_below_coulombs_limit_and_slides_at_its_rate_above():
+    # the rough-floor block of the full model's test, reduced: modes from full runs that stick
+    # (half of μ M g) and slide (twice it); the reduced runs at forces neither had must stick
+    # within the elastic stick's reach below μ M g (0.4 of it: the stick's swing, twice
+    # F ε / μ M g, stays inside ε) and slide as the analytic rigid block above it — and
+    # without friction the same modes slide at any force
+    n, rho, g, e, mu = 3, 1000.0, 9.81, 1e6, 0.5
+    side = n * MM
+    mass = rho * side ** 3
+    mesh = voxel_mesh(block(n), 1.0)
+    eps_mm = CreepSettings().stick_mm
+    material = CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho)
+    times = np.array([0.0, 0.005, 0.01, 0.015, 0.02])
+
+    def solver_at(ratio):
+        force = ratio * mu * mass * g
+        punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), mu)], punch,
+                           CreepSettings(tolerance=1e-4))
+
+    snapshots = [solver_at(r).run(times) for r in (0.5, 2.0)]
+    bottom = mesh.nodes_mm[:, 1] < 1e-9
+    for friction in (True, False):
+        reduced = _reduced_of(solver_at(1.0), snapshots, tolerance=1e-4, friction=friction)
+        if friction:
+            # at rest the floor's normal reactions carry the weight (the force balance), and
+            # only the bottom presses
+            settled = reduced.settle(reduced.loads(material), 0.0)
+            pressing = reduced.friction.nodes[settled.friction.pressing]
+            assert settled.friction.limit_n.sum() / mu == pytest.approx(mass * g, rel=0.01)
+            assert np.all(mesh.nodes_mm[pressing, 1] < 1e-9)
+        for ratio in (0.4, 1.5):
+            force = ratio * mu * mass * g
+            r = reduced.run(material, lambda t, f=force: f if t > 0 else 0.0, (), times)
+            slid_mm = np.abs(r.nodes_mm[-1][bottom, 0] - r.nodes_mm[0][bottom, 0]).max()
+            if not friction:
+                assert slid_mm > 10 * eps_mm      # nothing holds it
+            elif ratio < 1:
+                assert np.abs(r.advance_mm).max() <= 1.05 * eps_mm
+                assert slid_mm <= eps_mm
+            else:
+                expected = _rigid_block_on_elastic_stick(times, force / mass, mu, g, eps_mm * MM) / MM
+                np.testing.assert_allclose(r.advance_mm[1:], expected[1:], rtol=0.03)
+                assert r.stats["friction_rounds"] > 0
+
+
 @pytest.mark.parametrize("scale", [0.7, 1.4])
 def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snapshots_never_had(scale):
     # an ellipsoid pushed onto a rough floor: its curved bottom lands on the floor as it is

@@ -13,9 +13,9 @@ SOFA's ModelOrderReduction):
   vectors ``V = [V_u; v_s]`` that hold all but ``1 − energy`` of the snapshots' squared
   norm are the modes (:func:`pod_basis`). A mode is a combination of snapshots, so it keeps
   every linear constraint all of them keep: a floor node that stuck in every snapshot stays
-  on the floor, the nodes under the bar's face move with its advance. Contact therefore
-  needs no active set here — that is the approximation: a contact that opens or closes in
-  no snapshot cannot open or close in the reduced model.
+  on the floor, the nodes under the bar's face move with its advance. The other candidates'
+  non-penetration is a small contact solve a step (:meth:`ReducedCreep._solve`); their
+  sliding meets Coulomb's friction (:mod:`.reduced_friction`).
 * **Equation.** ``u = u₀ + V_u q``, ``s = s₀ + v_sᵀ q`` from the settled state (u₀, s₀),
   in equilibrium under gravity and F(0). Backward Euler on Eq. 12–16's forces, projected:
 
@@ -25,9 +25,9 @@ SOFA's ModelOrderReduction):
   once), ``C_r(μ) = Σ_e μ_e V_eᵀ C_e V_e`` (Eq. 16's μ per voxel from its shear rate, the
   full model's :meth:`~.hexahedra.MeshMatrices.rates` on ``V_u q̇``: the viscosity's
   non-linearity is kept whole), ``M_r = V_uᵀ M V_u``. The force F(t) does the work
-  ``F s``, so its generalised force is ``F v_s``. The contacts' reactions do no work on
-  the modes (a stuck node does not move; a pressed one moves only along its surface), so
-  they leave the projected equation.
+  ``F s``, so its generalised force is ``F v_s``. The contacts' normal reactions do no work
+  on the modes (a pressed node moves only along its surface), so they leave the projected
+  equation; their friction does, and stays (``Wᵀ f``, :mod:`.reduced_friction`).
 * **Steps** as the full model's: the local error ``½ Δt |u̇₊ − u̇|`` held near
   ``tolerance`` spacings on a ladder of step sizes, landing on the force schedule's
   breakpoints, frames interpolated between steps.
@@ -45,6 +45,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
+from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.errors import InputError
 
 MM = 1e-3
@@ -122,6 +123,14 @@ class ReducedSettings:
         largest node motion plus this many spacings.
     contact_tolerance
         A candidate is in contact when its gap is below this many spacings.
+    friction
+        Coulomb's friction on the candidates (:mod:`.reduced_friction`); False leaves sliding
+        free (the reduced model before it, kept to measure what friction buys).
+    friction_touch
+        A friction candidate presses while its gap is below this many spacings.
+    friction_rounds, friction_rtol
+        A step re-linearises the friction at most this many times, until the law holds to
+        ``friction_rtol`` of each node's μ_f λ_n.
     tolerance, max_step_s, first_step_s
         The step controller's, as :class:`~.integrate.CreepSettings` (spacings, s).
     """
@@ -130,6 +139,10 @@ class ReducedSettings:
     max_modes: int = 40
     contact_reach: float = 1.0
     contact_tolerance: float = 1e-4
+    friction: bool = True
+    friction_touch: float = 1e-2
+    friction_rounds: int = 4
+    friction_rtol: float = 1e-2
     tolerance: float = 0.005
     max_step_s: float = 1.0
     first_step_s: float | None = None
@@ -182,6 +195,12 @@ class ReducedCreep:
         self.settled_particles_mm = self.mesh.particles(basis.settled_nodes_mm)
         self.rows, self.bound, self._face = self._contact_rows(solver.contacts)
         self._pressed = np.zeros(0, np.int64)   # the rows the last contact solve pressed (its warm start)
+        self.friction = None
+        if self.settings.friction:
+            reach = self.settings.contact_reach * self.dx_m + basis.max_motion_mm * MM
+            self.friction = ReducedFriction(solver, v, basis.advance_modes_m, basis.settled_nodes_mm,
+                                            basis.advance_at_rest_mm, reach, solver.settings.stick_mm * MM,
+                                            self.settings.friction_touch * self.dx_m)
 
     def _contact_rows(self, contacts):
         """Non-penetration of the contact candidates as ``rows @ q ≥ bound`` (m), and the bar
@@ -267,22 +286,24 @@ class ReducedCreep:
         stats["contact_rows_worked"] = max(stats.get("contact_rows_worked", 0), int(work.sum()))
         return inverse.T @ (y0 + z)
 
-    def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> np.ndarray:
-        """C_r (r × r) at the voxels' shear rates of the reduced velocity ``qdot`` (Eq. 16)."""
+    def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 16's μ per voxel (Pa·s) at the shear rates of the reduced velocity ``qdot``, and
+        C_r (r × r) of it."""
         velocity = (self.basis.node_modes_m @ qdot).reshape(-1, 3)
-        mu = material.viscosity(self.matrices.rates(velocity)).astype(np.float32)
+        mu = material.viscosity(self.matrices.rates(velocity))
         r = len(qdot)
         c = np.empty((r, r))
-        c[self._upper] = mu @ self.viscous
+        c[self._upper] = mu.astype(np.float32) @ self.viscous
         c.T[self._upper] = c[self._upper]
-        return c
+        return mu, c
 
     def loads(self, material: CreepMaterial) -> "ReducedLoads":
         """The material's reduced stiffness and its loads at q = 0 (the weight, less u₀'s elastic force)."""
         lam, g = material.lame()
         kappa = lam + 2 * g / 3
         return ReducedLoads(material, 2 * g * self.deviatoric + kappa * self.volumetric + self.anchor,
-                            self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric)
+                            self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric,
+                            2 * g, kappa)
 
     def settle(self, loads: "ReducedLoads", force_n: float, stats: dict | None = None) -> "ReducedState":
         """Frame 0: static equilibrium under the weight and the bar's ``force_n`` (N) in this
@@ -290,7 +311,7 @@ class ReducedCreep:
         stats = step_counters(self) if stats is None else stats
         r = self.basis.size
         q = self._solve(loads.stiffness, loads.load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
-        return self.lag_viscosity(ReducedState(0.0, q, np.zeros(r), np.zeros((r, r))), loads)
+        return self.lag_viscosity(ReducedState(0.0, q, np.zeros(r), np.zeros((r, r)), None), loads)
 
     def step(self, state: "ReducedState", loads: "ReducedLoads", dt: float, force_n: float,
              stats: dict | None = None, error: bool = True) -> tuple["ReducedState", float]:
@@ -302,16 +323,34 @@ class ReducedCreep:
         a = loads.stiffness + visc / dt + self.mass / dt ** 2
         rhs = (loads.load + force_n * self.basis.advance_modes_m + self.mass @ (q + dt * qdot) / dt ** 2
                + visc @ q / dt)
-        qnew = self._solve(a, rhs, stats, q)
+        friction = state.friction
+        if friction is None or not np.any(friction.limit_n > 0):
+            qnew = self._solve(a, rhs, stats, q)
+        else:
+            # the friction's rounds: linearised where the last round ended (first where the
+            # step's rate would take it), at the normal reactions lagged a step, until the law
+            # holds at the solution
+            guess = q + dt * qdot
+            for _ in range(max(self.settings.friction_rounds, 1)):
+                matrix, extra, law = self.friction.linearised(friction, guess)
+                qnew = self._solve(a + matrix, rhs + extra, stats, q)
+                stats["friction_rounds"] += 1
+                if self.friction.law_error(friction, law, qnew) <= self.settings.friction_rtol:
+                    break
+                guess = qnew
         qdot_new = (qnew - q) / dt
         err = 0.5 * dt * float(np.abs(self.basis.node_modes_m @ (qdot_new - qdot)).max()) if error else np.nan
-        return ReducedState(state.t_s + dt, qnew, qdot_new, visc), err
+        return ReducedState(state.t_s + dt, qnew, qdot_new, visc, friction), err
 
     def lag_viscosity(self, state: "ReducedState", loads: "ReducedLoads") -> "ReducedState":
-        """``state`` with Eq. 16's μ from its own rates, for the next step (lagged, as the full model)."""
-        if loads.material.beta1 <= 0:
-            return state
-        return ReducedState(state.t_s, state.q, state.qdot, self._viscosity(loads.material, state.qdot))
+        """``state`` with what the next step takes from it (lagged, as the full model's): Eq. 16's
+        μ from its own rates, and the friction's normal reactions and slid anchors."""
+        mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot)
+        friction = state.friction
+        if self.friction is not None:
+            reactions = self.friction.normal_reactions_n(loads.two_g_pa, loads.kappa_pa, state.q, state.qdot, mu)
+            friction = self.friction.state(state.q, reactions, state.friction)
+        return ReducedState(state.t_s, state.q, state.qdot, visc, friction)
 
     def particles_mm(self, qs: np.ndarray) -> np.ndarray:
         """``(frames, N, 3)`` particle positions (mm) of the reduced coordinates ``qs`` ``(frames, r)``."""
@@ -337,6 +376,7 @@ class ReducedCreep:
         loads = self.loads(material)
         f0 = float(force_n(0.0))
         stats = step_counters(self)
+        self._pressed = np.zeros(0, np.int64)   # a run does not depend on the one before
         state = self.settle(loads, f0, stats)
         interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)
         base = st.first_step_s or interval / 4.0
@@ -382,28 +422,34 @@ class ReducedCreep:
 
 @dataclass(frozen=True)
 class ReducedLoads:
-    """A material's reduced stiffness (N/m per unit q²) and its loads at q = 0 (N per unit q)."""
+    """A material's reduced stiffness (N/m per unit q²) and its loads at q = 0 (N per unit q);
+    its 2G and κ (Pa)."""
 
     material: CreepMaterial
     stiffness: np.ndarray
     load: np.ndarray
+    two_g_pa: float
+    kappa_pa: float
 
 
 @dataclass(frozen=True)
 class ReducedState:
-    """Where the reduced model is: time (s), coordinates q, their rate (1/s) and the viscosity
-    C_r (N·s/m per unit q²) the next step takes (Eq. 16 at the last step's rates)."""
+    """Where the reduced model is: time (s), coordinates q, their rate (1/s), the viscosity
+    C_r (N·s/m per unit q²) the next step takes (Eq. 16 at the last step's rates) and the
+    friction's anchors and limits (None: no friction, or not yet lagged)."""
 
     t_s: float
     q: np.ndarray
     qdot: np.ndarray
     viscous: np.ndarray
+    friction: FrictionState | None = None
 
 
 def step_counters(model: ReducedCreep) -> dict:
     """The counters a run or a loop of steps keeps (steps, rejected, contact solves)."""
     return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0,
-            "contact_rows": len(model.rows)}
+            "contact_rows": len(model.rows), "friction_rounds": 0,
+            "friction_candidates": model.friction.size if model.friction is not None else 0}
 
 
 def _least_distance(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

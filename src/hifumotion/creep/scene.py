@@ -182,7 +182,7 @@ def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, sett
         tell = None if progress is None else (lambda f, i=i: progress((i + f) / len(scenes)))
         simulate_creep(scene, tissue_particles=(mesh.centres_mm, tissue_volume_mm3), mesh=mesh, keep=runs,
                        progress=tell, settings=creep)
-    solver, _ = creep_solver(scenes[0], mesh)
+    solver, _ = creep_solver(scenes[0], mesh, creep)
     return ReducedCreep(solver, pod_basis(runs, settings.energy, settings.max_modes), settings)
 
 

@@ -172,7 +172,8 @@ class OnlineAssimilator:
             cov = cov - gain_t.T @ (h @ cov)
         self.cov = 0.5 * (cov + cov.T)
         self.scale = max(float(x[r]), 0.0)    # the bar pushes; it does not pull
-        analysed = ReducedState(nominal.t_s, x[:r], nominal.qdot + (x[:r] - nominal.q) / dt, nominal.viscous)
+        analysed = ReducedState(nominal.t_s, x[:r], nominal.qdot + (x[:r] - nominal.q) / dt, nominal.viscous,
+                                 nominal.friction)
         self.state = self.model.lag_viscosity(analysed, self.loads)
         self.frame += 1
         predicted = {}
