@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+import os
+import stat
+
 import numpy as np
 import pytest
 import SimpleITK as sitk
@@ -25,6 +29,7 @@ from hifumotion.io import (
     write_png_stack,
     write_sequence_nifti,
 )
+from hifumotion.io.files import write_text
 from hifumotion.sequence import ImageSequence
 
 US_MULTIFRAME = "1.2.840.10008.5.1.4.1.1.3.1"
@@ -315,6 +320,63 @@ def test_output_folder_never_clobbers(tmp_path):
         (out / "run_info.json").write_text("{}")
     assert (target / "result.txt").read_text() == "second"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging folder left behind
+
+
+def test_overwrite_never_deletes_what_hifumotion_did_not_write(tmp_path):
+    target = tmp_path / "run"
+    with output_folder(target) as out:
+        (out / "figures").mkdir()
+        (out / "figures" / "a.png").write_bytes(b"png")
+        (out / "run_info.json").write_text("{}")
+    listed = json.loads((target / "run_info.json").read_text())["outputs"]
+    assert listed == ["figures", "figures/a.png", "run_info.json"]
+    # the user's notes beside the results: --overwrite refuses, naming them, and deletes nothing
+    (target / "notes.txt").write_text("mine")
+    (target / "figures" / "sketch.svg").write_text("mine too")
+    with pytest.raises(InputError, match=r"notes\.txt") as refused:
+        with output_folder(target, overwrite=True) as out:
+            (out / "run_info.json").write_text("{}")
+    assert "figures/sketch.svg" in str(refused.value)
+    assert (target / "notes.txt").read_text() == "mine" and (target / "figures" / "a.png").is_file()
+    (target / "notes.txt").unlink()
+    (target / "figures" / "sketch.svg").unlink()
+    with output_folder(target, overwrite=True) as out:
+        (out / "run_info.json").write_text("{}")
+    assert not (target / "figures").exists()          # all of it was the earlier run's: replaced
+    # a folder whose run_info.json lists nothing (an older version's) cannot be told apart
+    (target / "run_info.json").write_text("{}")
+    with pytest.raises(InputError, match="does not list"):
+        with output_folder(target, overwrite=True):
+            pass
+    assert (target / "run_info.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_a_file_put_into_the_output_folder_during_the_run_is_kept(tmp_path):
+    target = tmp_path / "run"
+    with output_folder(target) as out:
+        (out / "run_info.json").write_text("{}")
+    with pytest.raises(InputError, match="this run's output is in"):
+        with output_folder(target, overwrite=True) as out:
+            (out / "result.txt").write_text("new")
+            (out / "run_info.json").write_text("{}")
+            (target / "late.txt").write_text("the user's")      # written while the run goes on
+    assert (target / "late.txt").read_text() == "the user's"
+    kept = [p for p in tmp_path.iterdir() if p.name.startswith("run.new-")]
+    assert len(kept) == 1 and (kept[0] / "result.txt").read_text() == "new"
+
+
+def test_outputs_follow_the_umask(tmp_path):
+    old = os.umask(0o027)
+    try:
+        with output_folder(tmp_path / "run") as out:
+            write_text(out / "a.txt", "x")
+            (out / "run_info.json").write_text("{}")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "run").stat().st_mode) == 0o750
+    assert stat.S_IMODE((tmp_path / "run" / "a.txt").stat().st_mode) == 0o640
+    assert stat.S_IMODE((tmp_path / "run" / "run_info.json").stat().st_mode) == 0o640
 
 
 def test_output_path_through_a_missing_folder_is_checked_where_it_resolves(tmp_path):

@@ -60,6 +60,10 @@ def test_score_cli_writes_table_and_refuses_to_overwrite(tmp_path):
     assert (pred / "score" / "score.csv").read_text().startswith("frame,set,dsc")
     again = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert again.returncode == 2 and "Traceback" not in again.stderr
+    # its output folder the prediction it scores: refused even with --overwrite, nothing lost
+    into_itself = subprocess.run(cmd + ["-o", str(pred), "--overwrite"], capture_output=True, text=True, check=False)
+    assert into_itself.returncode == 2 and "an input of this run" in into_itself.stderr
+    assert len(list((pred / "frames").glob("frame_*.png"))) == 2
 
 
 def test_whole_short_series_scores_on_the_scaled_protocol():

@@ -40,7 +40,7 @@ def score(
     if images is not None and not images.is_dir():
         raise InputError("no such folder of observed frames", images)
     out_dir = output if output is not None else prediction_dir / "score"
-    with output_folder(out_dir, overwrite, inputs=(truth_dir, images)) as out:
+    with output_folder(out_dir, overwrite, inputs=(prediction_dir, truth_dir, images)) as out:
         write_text(out / "score.csv", table.to_csv())
         write_json(out / "score.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows})
         if frames_dir.is_dir():

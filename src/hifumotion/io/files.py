@@ -3,12 +3,16 @@
 Every writer in the package goes through :func:`atomic_path`: the data are
 written to a temporary name in the destination folder and moved into place
 with :func:`os.replace`, so a reader never sees half a file and a crash never
-leaves one. A run's output folder is prepared by :func:`output_folder`.
+leaves one. A run's output folder is prepared by :func:`output_folder`: its
+``run_info.json`` lists every file and folder the run wrote, and ``--overwrite``
+replaces a folder only when nothing else is in it. Files and folders are made with
+the permissions the umask gives (not the temporary files' private 0600/0700).
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import tempfile
@@ -36,6 +40,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     tmp = Path(tmp_name)
     try:
         yield tmp
+        follow_umask(tmp)
         os.replace(tmp, final)
     finally:
         if tmp.exists():
@@ -51,6 +56,60 @@ def write_text(path: str | Path, text: str) -> Path:
 
 #: The file every hifumotion output folder holds; ``--overwrite`` replaces only folders that have it.
 RUN_INFO = "run_info.json"
+#: ``run_info.json``'s list of what the run wrote (paths relative to the folder, POSIX)
+OUTPUTS_KEY = "outputs"
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def follow_umask(path: str | Path, folder: bool = False) -> None:
+    """Give ``path`` the permissions a plain ``open``/``mkdir`` would have under the umask
+    (temporary files and folders are made private)."""
+    try:
+        os.chmod(path, (0o777 if folder else 0o666) & ~_umask())
+    except OSError:
+        pass
+
+
+def _contents(folder: Path) -> list[str]:
+    """Every file, link and folder under ``folder`` (relative POSIX paths, sorted; links not followed)."""
+    found = []
+    for root, dirs, files in os.walk(folder):
+        rel = Path(root).relative_to(folder)
+        found += [(rel / name).as_posix() for name in dirs + files]
+    return sorted(found)
+
+
+def _record_outputs(staging: Path) -> None:
+    """List what the run wrote in its ``run_info.json`` (what a later ``--overwrite`` may replace)."""
+    info = staging / RUN_INFO
+    if not info.is_file():
+        return
+    try:
+        data = json.loads(info.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    if isinstance(data, dict):
+        data[OUTPUTS_KEY] = _contents(staging)
+        write_text(info, json.dumps(data, indent=2, default=str))
+
+
+def foreign_contents(folder: Path) -> list[str] | None:
+    """What is in ``folder`` that its ``run_info.json`` does not list as written by hifumotion
+    (None: it lists nothing — an older version's folder, or the file is unreadable)."""
+    try:
+        data = json.loads((folder / RUN_INFO).read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return None
+    listed = data.get(OUTPUTS_KEY) if isinstance(data, dict) else None
+    if not isinstance(listed, list):
+        return None
+    ours = set(map(str, listed)) | {RUN_INFO}
+    return [p for p in _contents(folder) if p not in ours]
 
 
 def require_regular_file(path: str | Path, what: str = "file") -> Path:
@@ -102,7 +161,21 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
             if not (final / RUN_INFO).is_file():
                 raise InputError(f"was not written by hifumotion (it has no {RUN_INFO}); --overwrite only replaces "
                                  "hifumotion's own output folders — choose a new one", folder)
+            _refuse_foreign(final, folder)
     return folder
+
+
+def _refuse_foreign(final: Path, shown: Path) -> None:
+    """Raise when ``final`` holds anything its run did not write (``--overwrite`` would delete it)."""
+    foreign = foreign_contents(final)
+    if foreign is None:
+        raise InputError(f"its {RUN_INFO} does not list what hifumotion wrote there (an older version's folder, or "
+                         "an edited file), so --overwrite cannot tell your files from its own — choose a new folder "
+                         "or delete it yourself", shown)
+    if foreign:
+        named = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        raise InputError(f"holds files hifumotion did not write ({named}); --overwrite never deletes them — move them "
+                         "out or choose a new folder", shown)
 
 
 def _make_parent(final: Path, shown: Path) -> None:
@@ -136,12 +209,22 @@ def output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Itera
         staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
     except OSError as exc:
         raise InputError(f"cannot create the output folder here ({exc.strerror or exc})", shown) from None
+    follow_umask(staging, folder=True)
     try:
         yield staging
+        _record_outputs(staging)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
     if final.exists():
+        if any(final.iterdir()):
+            try:
+                # a file put there while the run was going is not the run's to delete
+                _refuse_foreign(final, shown)
+            except InputError as exc:
+                kept = final.with_name(f"{final.name}.new-{uuid.uuid4().hex[:8]}")
+                staging.rename(kept)
+                raise InputError(f"{exc.reason}; this run's output is in {kept}", shown) from None
         retired = final.with_name(f".{final.name}.old-{uuid.uuid4().hex[:8]}")
         final.rename(retired)
         staging.rename(final)
