@@ -343,13 +343,15 @@ def test_overwrite_never_deletes_what_hifumotion_did_not_write(tmp_path):
     with output_folder(target, overwrite=True) as out:
         (out / "run_info.json").write_text("{}")
     assert not (target / "figures").exists()          # all of it was the earlier run's: replaced
-    # a folder whose run_info.json lists nothing (an older version's) cannot be told apart
+    # a folder whose run_info.json lists nothing (an older version's): its files cannot be told
+    # from the user's, so it is moved aside, not deleted
     (target / "run_info.json").write_text("{}")
-    with pytest.raises(InputError, match="does not list"):
-        with output_folder(target, overwrite=True):
-            pass
-    assert (target / "run_info.json").is_file()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+    (target / "maybe_mine.txt").write_text("?")
+    with output_folder(target, overwrite=True) as out:
+        (out / "run_info.json").write_text("{}")
+    aside = [p for p in tmp_path.iterdir() if p.name.startswith("run.replaced-")]
+    assert len(aside) == 1 and (aside[0] / "maybe_mine.txt").read_text() == "?"
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("run.replaced-")) == ["run"]
 
 
 def test_a_file_put_into_the_output_folder_during_the_run_is_kept(tmp_path):

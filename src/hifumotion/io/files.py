@@ -5,7 +5,8 @@ written to a temporary name in the destination folder and moved into place
 with :func:`os.replace`, so a reader never sees half a file and a crash never
 leaves one. A run's output folder is prepared by :func:`output_folder`: its
 ``run_info.json`` lists every file and folder the run wrote, and ``--overwrite``
-replaces a folder only when nothing else is in it. Files and folders are made with
+replaces a folder only when nothing else is in it (one whose ``run_info.json`` lists
+nothing, an older version's, is moved aside to ``NAME.replaced-*``, never deleted). Files and folders are made with
 the permissions the umask gives (not the temporary files' private 0600/0700).
 """
 
@@ -166,12 +167,10 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
 
 
 def _refuse_foreign(final: Path, shown: Path) -> None:
-    """Raise when ``final`` holds anything its run did not write (``--overwrite`` would delete it)."""
+    """Raise when ``final`` holds anything its run did not write (``--overwrite`` would delete it).
+    A folder whose ``run_info.json`` lists nothing (an older version's) passes: it is kept aside,
+    not deleted (:func:`output_folder`)."""
     foreign = foreign_contents(final)
-    if foreign is None:
-        raise InputError(f"its {RUN_INFO} does not list what hifumotion wrote there (an older version's folder, or "
-                         "an edited file), so --overwrite cannot tell your files from its own — choose a new folder "
-                         "or delete it yourself", shown)
     if foreign:
         named = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
         raise InputError(f"holds files hifumotion did not write ({named}); --overwrite never deletes them — move them "
@@ -225,9 +224,14 @@ def output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Itera
                 kept = final.with_name(f"{final.name}.new-{uuid.uuid4().hex[:8]}")
                 staging.rename(kept)
                 raise InputError(f"{exc.reason}; this run's output is in {kept}", shown) from None
-        retired = final.with_name(f".{final.name}.old-{uuid.uuid4().hex[:8]}")
+        unlisted = foreign_contents(final) is None
+        # a folder that does not list what hifumotion wrote may hold the user's files too: it is
+        # kept aside, visible, rather than deleted
+        retired = final.with_name(f"{final.name}.replaced-{uuid.uuid4().hex[:8]}" if unlisted
+                                  else f".{final.name}.old-{uuid.uuid4().hex[:8]}")
         final.rename(retired)
         staging.rename(final)
-        shutil.rmtree(retired, ignore_errors=True)
+        if not unlisted:
+            shutil.rmtree(retired, ignore_errors=True)
     else:
         staging.rename(final)
