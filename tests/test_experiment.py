@@ -196,6 +196,34 @@ def test_load_observed_reads_what_the_twin_wrote(twin, tmp_path):
         load_observed(tmp_path)
 
 
+def test_observed_frames_are_read_in_the_order_of_their_numbers(twin, tmp_path):
+    # frames named without zero padding sort as text frame_0, frame_1, frame_10, frame_11, …,
+    # frame_2: they must be read by number; a gap, a number twice or a count from 1 is refused
+    import shutil
+
+    from hifumotion.observed import load_observed
+
+    folder, result = twin
+    copy = tmp_path / "observed"
+    shutil.copytree(folder / "observed", copy)
+    frames = sorted((copy / "frames").glob("frame_*.png"))
+    assert len(frames) > 11
+    for p in frames:
+        p.rename(p.with_name(f"frame_{int(p.stem[6:])}.png"))
+    assert np.array_equal(load_observed(copy).frames, result.frames)
+    (copy / "frames" / "frame_5.png").rename(copy / "frames" / "frame_0005.png")
+    with pytest.raises(InputError, match="number 5 twice"):
+        shutil.copy(copy / "frames" / "frame_0005.png", copy / "frames" / "frame_5.png")
+        load_observed(copy)
+    (copy / "frames" / "frame_0005.png").unlink()
+    (copy / "frames" / "frame_7.png").unlink()
+    with pytest.raises(InputError, match="frame_0007.png is missing"):
+        load_observed(copy)
+    (copy / "frames" / "frame_0.png").unlink()
+    with pytest.raises(InputError, match="numbered from 1"):
+        load_observed(copy)
+
+
 def test_shift_boundary_moves_a_disc_edge_by_the_offset():
     from hifumotion.observed import shift_boundary
     from conftest import disc

@@ -68,12 +68,37 @@ class Observed:
         return np.arange(len(self.frames)) * self.frame_interval_s
 
 
-def _stack(folder: Path, pattern: str, shape: tuple[int, int]) -> np.ndarray:
+def numbered_files(folder: Path, prefix: str, suffix: str = ".png") -> list[Path]:
+    """``folder``'s ``PREFIXNNNN.png`` files in the order of their numbers (``frame_10`` after
+    ``frame_9``, not after ``frame_1``): numbered from 0, with no gap and no number twice, or
+    one error naming the file or the missing number."""
+    files = [p for p in folder.glob(f"{prefix}*{suffix}")] if folder.is_dir() else []
+    if not files:
+        raise InputError(f"no {prefix}NNNN{suffix} images", folder)
+    numbered: dict[int, Path] = {}
+    for p in files:
+        digits = p.name[len(prefix):-len(suffix)]
+        if not (digits.isascii() and digits.isdigit()):
+            raise InputError(f"not a numbered image (expected {prefix}NNNN{suffix})", p)
+        n = int(digits)
+        if n in numbered:
+            raise InputError(f"number {n} twice: {numbered[n].name} and {p.name}", folder)
+        numbered[n] = p
+    order = sorted(numbered)
+    if order[0] != 0:
+        raise InputError(f"the images are numbered from {order[0]}; expected from 0 ({prefix}0000{suffix}: "
+                         "setup.json's frame numbers count from it)", folder)
+    if order[-1] != len(order) - 1:
+        missing = next(i for i, n in enumerate(order) if i != n)
+        raise InputError(f"{prefix}{missing:04d}{suffix} is missing ({len(order)} images numbered up to "
+                         f"{order[-1]})", folder)
+    return [numbered[n] for n in order]
+
+
+def _stack(folder: Path, prefix: str, shape: tuple[int, int]) -> np.ndarray:
     from hifumotion.io.raster import read_raster_array
 
-    files = sorted(folder.glob(pattern))
-    if not files:
-        raise InputError(f"no {pattern} images", folder)
+    files = numbered_files(folder, prefix)
     images = []
     for p in files:
         image = read_raster_array(p)[0]
@@ -96,8 +121,8 @@ def load_observed(folder: str | Path) -> Observed:
         raise InputError("not an observed experiment folder (no setup.json)", root)
     setup = read_setup(setup_path)
     shape = setup.imaging.image_shape
-    sweep = _stack(root / "sweep", "slice_*.png", shape)
-    frames = _stack(root / "frames", "frame_*.png", shape)
+    sweep = _stack(root / "sweep", "slice_", shape)
+    frames = _stack(root / "frames", "frame_", shape)
     if len(frames) != setup.frames:
         raise InputError(f"{len(frames)} frame images; setup.json says frames = {setup.frames}", root / "frames")
     pos_path = require_regular_file(root / "sweep_positions.csv", "sweep_positions.csv")
