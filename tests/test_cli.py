@@ -185,6 +185,11 @@ def test_track_follows_the_twins_target_and_writes_its_fields(small_twin, tmp_pa
     assert summary["frames"] == len(result.frames) and summary["material_points"]["interior"] > 10
     # the bar's tracked push goes the way the bar points (down)
     assert summary["bar_shift_mm"][-1][1] < 0
+    # PNG frames carry no pixel size: tracking them is refused, naming the option, not done in 1 mm pixels
+    bare = run("track", str(folder / "observed" / "frames"), "--init", str(folder / "observed" / "initial_contour.csv"),
+               "-o", str(tmp_path / "bare"))
+    assert bare.returncode == 2 and "--spacing" in bare.stderr and "Traceback" not in bare.stderr
+    assert not (tmp_path / "bare").exists()
 
 
 def test_a_closed_pipe_is_not_an_error():
