@@ -21,9 +21,10 @@ M = TypeVar("M", bound=BaseModel)
 
 
 class ConfigModel(BaseModel):
-    """Base of every configuration model: unknown keys are errors, values are validated on assignment."""
+    """Base of every configuration model: unknown keys are errors, numbers finite, values validated on assignment."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    # NaN and ±inf are refused in every number (a JSON "NaN" or a TOML "inf" is no setting)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 class ReadOptions(ConfigModel):
