@@ -280,6 +280,25 @@ def test_the_blockwise_reduction_is_the_sparse_product():
     assert np.all(np.diag(got)[constrained] > 0)
 
 
+def test_the_reduced_shear_rates_are_the_meshs_own():
+    # the rates the hyper-reduction reads straight from q̇ (creep/hyper.py) against the mesh's
+    # kernel on the node velocities, for random modes on a block with a displaced (distorted) corner
+    from hifumotion.creep.hexahedra import MeshMatrices
+    from hifumotion.creep.hyper import rate_modes, shear_rates
+
+    mesh = voxel_mesh(block(3), 1.0)
+    nodes = mesh.nodes_mm * MM
+    corner = np.argmin(np.linalg.norm(nodes, axis=1))
+    nodes[corner] += 0.1 * MM
+    m = MeshMatrices(nodes, mesh.elements, MM)
+    assert len(m.distorted) > 0
+    rng = np.random.default_rng(4)
+    modes = rng.normal(size=(3 * len(nodes), 5))
+    qdot = rng.normal(size=5)
+    np.testing.assert_allclose(shear_rates(rate_modes(m, modes, np.arange(len(mesh.elements))), qdot),
+                               m.rates((modes @ qdot).reshape(-1, 3)), rtol=1e-10)
+
+
 def _reduced_of(solver, runs, **settings):
     from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
 
@@ -374,16 +393,19 @@ def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snaps
     snapshots = []
     for f in (0.5, 2.0):
         simulate_creep(scene_at(f), mesh=mesh, tissue_particles=(mesh.centres_mm, vol), keep=snapshots)
-    reduced = _reduced_of(creep_solver(scene_at(1.0), mesh)[0], snapshots)
     scene = scene_at(scale)
     truth = []
     simulate_creep(scene, mesh=mesh, tissue_particles=(mesh.centres_mm, vol), keep=truth)
     punch, _ = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
-    r = reduced.run(scene_material(scene), punch.force_n, punch.breakpoints_s, output_times(scene))
     moved = truth[0].particles_mm - truth[0].particles_mm[:1]
     motion = np.sqrt(np.mean(np.sum(moved ** 2, axis=-1), axis=1))
-    error = np.sqrt(np.mean(np.sum((r.particles_mm - r.particles_mm[:1] - moved) ** 2, axis=-1), axis=1))
     assert motion.max() > 0.3     # mm: a push that squashes it
-    assert error.max() <= 0.03 * motion.max()
-    assert r.nodes_mm[..., 1].min() >= -1e-3 * scene.particles.spacing_mm     # nothing through the floor
-    assert r.stats["contact_solves"] > 0
+    # every voxel's viscosity summed, and ECSW's sample of them (fewer voxels, the same motion)
+    for hyper in (False, True):
+        reduced = _reduced_of(creep_solver(scene_at(1.0), mesh)[0], snapshots, hyper_reduction=hyper)
+        r = reduced.run(scene_material(scene), punch.force_n, punch.breakpoints_s, output_times(scene))
+        error = np.sqrt(np.mean(np.sum((r.particles_mm - r.particles_mm[:1] - moved) ** 2, axis=-1), axis=1))
+        assert error.max() <= 0.03 * motion.max()
+        assert r.nodes_mm[..., 1].min() >= -1e-3 * scene.particles.spacing_mm     # nothing through the floor
+        assert r.stats["contact_solves"] > 0
+        assert (r.stats["viscous_voxels"] < len(mesh.elements)) == hyper

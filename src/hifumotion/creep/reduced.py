@@ -44,6 +44,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rates
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.errors import InputError
@@ -70,6 +71,9 @@ class ReducedBasis:
         Every singular value of the snapshot matrix (the energy the modes keep).
     max_motion_mm
         The largest node displacement in the snapshots (mm).
+    training_rates
+        ``(J, r)`` the snapshots' reduced velocities (1/s), frame to frame: what the
+        viscosity's hyper-reduction (:mod:`.hyper`) is fitted on.
     """
 
     node_modes_m: np.ndarray
@@ -78,6 +82,7 @@ class ReducedBasis:
     advance_at_rest_mm: float
     singular_values: np.ndarray
     max_motion_mm: float
+    training_rates: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def size(self) -> int:
@@ -105,9 +110,15 @@ def pod_basis(runs: Sequence[CreepResult], energy: float = 1.0 - 1e-8, max_modes
         raise InputError("the full runs did not move: no modes to reduce onto", "snapshots")
     kept = np.cumsum(sigma ** 2) / np.sum(sigma ** 2)
     r = int(min(np.searchsorted(kept, energy) + 1, max_modes, len(sigma)))
+    # each run's reduced velocity frame to frame (its first frame, the settled state, is q = 0)
+    rates, start = [], 0
+    for run, col in zip(runs, columns):
+        q = np.vstack([np.zeros((1, r)), col @ left[:, :r]])
+        rates.append(np.diff(q, axis=0) / np.diff(run.times_s)[:, None])
     return ReducedBasis(np.ascontiguousarray(left[:-1, :r]), left[-1, :r].copy(), runs[0].nodes_mm[0].copy(),
                         float(runs[0].stats.get("advance_at_rest_mm", 0.0)), sigma,
-                        float(np.sqrt((x[:-1].reshape(-1, 3, x.shape[1]) ** 2).sum(axis=1)).max()) / MM)
+                        float(np.sqrt((x[:-1].reshape(-1, 3, x.shape[1]) ** 2).sum(axis=1)).max()) / MM,
+                        np.vstack(rates))
 
 
 @dataclass
@@ -131,6 +142,9 @@ class ReducedSettings:
     friction_rounds, friction_rtol
         A step re-linearises the friction at most this many times, until the law holds to
         ``friction_rtol`` of each node's μ_f λ_n.
+    hyper_reduction, hyper_tolerance, hyper_samples
+        Eq. 16's viscosity on ECSW's sampled voxels (:mod:`.hyper`), fitted to this relative
+        error on ``hyper_samples`` of the snapshots' velocities; False sums every voxel.
     tolerance, max_step_s, first_step_s
         The step controller's, as :class:`~.integrate.CreepSettings` (spacings, s).
     """
@@ -143,6 +157,9 @@ class ReducedSettings:
     friction_touch: float = 1e-2
     friction_rounds: int = 4
     friction_rtol: float = 1e-2
+    hyper_reduction: bool = False
+    hyper_tolerance: float = 1e-3
+    hyper_samples: int = 24
     tolerance: float = 0.005
     max_step_s: float = 1.0
     first_step_s: float | None = None
@@ -184,10 +201,19 @@ class ReducedCreep:
         blocks[reg] = np.matmul(ve[reg].transpose(0, 2, 1), np.matmul(m.cube.viscous, ve[reg]))
         if len(dis):
             blocks[dis] = np.matmul(ve[dis].transpose(0, 2, 1), np.matmul(m.visc, ve[dis]))
-        # the blocks are symmetric: their upper triangles, in single precision (the sum over the
-        # voxels streams them once a step; 10⁻⁷ of C_r is far below the step's error)
+        # the voxels whose viscosity is summed, with their weights: ECSW's sample or all of them
+        modes_all = rate_modes(m, v, np.arange(len(elements)))
+        self.sampled = SampledViscosity(np.arange(len(elements)), np.ones(len(elements)), 0.0)
+        if self.settings.hyper_reduction and len(basis.training_rates) and solver.material.beta1 > 0:
+            pick = np.unique(np.linspace(0, len(basis.training_rates) - 1, self.settings.hyper_samples).astype(int))
+            self.sampled = ecsw(blocks, modes_all, basis.training_rates[pick], solver.material,
+                                self.settings.hyper_tolerance)
+        # the blocks are symmetric: their upper triangles, weighted, in single precision (the sum
+        # over the voxels streams them once a step; 10⁻⁷ of C_r is far below the step's error)
         self._upper = np.triu_indices(v.shape[1])
-        self.viscous = np.ascontiguousarray(blocks[:, self._upper[0], self._upper[1]], np.float32)
+        self.viscous = np.ascontiguousarray(
+            blocks[self.sampled.voxels][:, self._upper[0], self._upper[1]] * self.sampled.weights[:, None], np.float32)
+        self._n_voxels = len(elements)
         # each particle moves by its voxel corners' mean displacement (VoxelMesh.particles)
         # (3 × voxels, r): a frame's particles are one matrix product away
         self.particle_modes_mm = np.ascontiguousarray(ve.reshape(len(elements), 8, 3, -1).mean(axis=1).reshape(
@@ -201,6 +227,14 @@ class ReducedCreep:
             self.friction = ReducedFriction(solver, v, basis.advance_modes_m, basis.settled_nodes_mm,
                                             basis.advance_at_rest_mm, reach, solver.settings.stick_mm * MM,
                                             self.settings.friction_touch * self.dx_m)
+        # the voxels whose rates a step needs: the sample's, and those around the friction's
+        # candidates (their normal reactions' viscous part)
+        rated = self.sampled.voxels
+        if self.friction is not None:
+            rated = np.union1d(rated, self.friction.voxels)
+        self._rated = rated
+        self._rate_modes = modes_all[rated]
+        self._sample_in_rated = np.searchsorted(rated, self.sampled.voxels)
 
     def _contact_rows(self, contacts):
         """Non-penetration of the contact candidates as ``rows @ q ≥ bound`` (m), and the bar
@@ -287,13 +321,14 @@ class ReducedCreep:
         return inverse.T @ (y0 + z)
 
     def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Eq. 16's μ per voxel (Pa·s) at the shear rates of the reduced velocity ``qdot``, and
-        C_r (r × r) of it."""
-        velocity = (self.basis.node_modes_m @ qdot).reshape(-1, 3)
-        mu = material.viscosity(self.matrices.rates(velocity))
+        """Eq. 16's μ per voxel (Pa·s) at the shear rates of the reduced velocity ``qdot`` (on the
+        voxels a step reads: ECSW's and the friction's), and C_r (r × r) of it."""
+        rated = material.viscosity(shear_rates(self._rate_modes, qdot))
+        mu = np.zeros(self._n_voxels)
+        mu[self._rated] = rated          # the voxels no one reads are left at 0
         r = len(qdot)
         c = np.empty((r, r))
-        c[self._upper] = mu.astype(np.float32) @ self.viscous
+        c[self._upper] = rated[self._sample_in_rated].astype(np.float32) @ self.viscous
         c.T[self._upper] = c[self._upper]
         return mu, c
 
@@ -449,7 +484,8 @@ def step_counters(model: ReducedCreep) -> dict:
     """The counters a run or a loop of steps keeps (steps, rejected, contact solves)."""
     return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0,
             "contact_rows": len(model.rows), "friction_rounds": 0,
-            "friction_candidates": model.friction.size if model.friction is not None else 0}
+            "friction_candidates": model.friction.size if model.friction is not None else 0,
+            "viscous_voxels": model.sampled.size, "viscous_fit_residual": model.sampled.residual}
 
 
 def _least_distance(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
