@@ -23,8 +23,9 @@ SOFA's ModelOrderReduction):
 
   with ``K_r = 2G V_uᵀ K_dev V_u + κ V_uᵀ K_vol V_u`` (E and ν scale two matrices made
   once), ``C_r(μ) = Σ_e μ_e V_eᵀ C_e V_e`` (Eq. 16's μ per voxel from its shear rate, the
-  full model's :meth:`~.hexahedra.MeshMatrices.rates` on ``V_u q̇``: the viscosity's
-  non-linearity is kept whole), ``M_r = V_uᵀ M V_u``. The force F(t) does the work
+  full model's rate on ``V_u q̇``, read from q̇ directly (:func:`.hyper.shear_rates`): the
+  viscosity's non-linearity is kept whole; optionally on ECSW's sampled voxels, :mod:`.hyper`),
+  ``M_r = V_uᵀ M V_u``. The force F(t) does the work
   ``F s``, so its generalised force is ``F v_s``. The contacts' normal reactions do no work
   on the modes (a pressed node moves only along its surface), so they leave the projected
   equation; their friction does, and stays (``Wᵀ f``, :mod:`.reduced_friction`).
@@ -111,7 +112,7 @@ def pod_basis(runs: Sequence[CreepResult], energy: float = 1.0 - 1e-8, max_modes
     kept = np.cumsum(sigma ** 2) / np.sum(sigma ** 2)
     r = int(min(np.searchsorted(kept, energy) + 1, max_modes, len(sigma)))
     # each run's reduced velocity frame to frame (its first frame, the settled state, is q = 0)
-    rates, start = [], 0
+    rates = []
     for run, col in zip(runs, columns):
         q = np.vstack([np.zeros((1, r)), col @ left[:, :r]])
         rates.append(np.diff(q, axis=0) / np.diff(run.times_s)[:, None])

@@ -4,7 +4,7 @@ The reduced model (:mod:`.reduced`) keeps non-penetration through its modes and 
 contact solve, but a mode that slides along the floor or the bar's face cost nothing
 beyond its elastic part: the full model's floor resists it with Coulomb's friction
 (:mod:`.contact`). Measured on the oblique twin, where the tilted bar slides the sample,
-the reduced model without friction was 7–32 % off the full model's contour motion
+the reduced model without friction was 6–19 % off the full model's contour motion
 (docs/decisions.md, "Friction in the reduced model"). This module gives it the same law:
 
 * **Where.** The candidates are the surface nodes near a frictional solid (a plane with
@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from hifumotion.creep.contact import friction_force, friction_linearised
+from hifumotion.creep.contact import friction_linearised
 
 MM = 1e-3
 
@@ -216,11 +216,6 @@ class ReducedFriction:
         d = np.einsum("par,r->pa", self.tangent_modes[nodes], q) - law.anchor_t
         limit = state.limit_n[nodes]
         return float(np.max(law.error_n(d, limit, self.stick_m) / limit))
-
-    def forces_n(self, state: FrictionState, q: np.ndarray) -> np.ndarray:
-        """The friction force (N, ``(m, 2)``) on every candidate at ``q``, in its tangents (opposing d)."""
-        d = (self._tangent_flat @ q).reshape(-1, 2) - state.anchor_t_m
-        return -friction_force(d, state.limit_n, self.stick_m)
 
 
 __all__ = ["FrictionState", "ReducedFriction"]
