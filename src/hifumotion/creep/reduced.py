@@ -158,9 +158,9 @@ class ReducedSettings:
     friction_touch: float = 1e-2
     friction_rounds: int = 4
     friction_rtol: float = 1e-2
-    hyper_reduction: bool = False
+    hyper_reduction: bool = True
     hyper_tolerance: float = 1e-3
-    hyper_samples: int = 24
+    hyper_samples: int = 8
     tolerance: float = 0.005
     max_step_s: float = 1.0
     first_step_s: float | None = None
