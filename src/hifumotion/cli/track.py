@@ -88,11 +88,11 @@ def track(
     if init is None:
         raise InputError("give frame 0's initial contour with --init (or track an observed/ folder)", "--init")
     seq = read_sequence(cine, parse_spacing(spacing), frame_interval)
+    if seq.n_frames < 2:
+        raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
     if not seq.spacing_known:
         # the track's displacements and contours are in mm: a pixel size guessed would scale them all
         raise InputError("carries no pixel size; give it with --spacing MM (or 'ROW,COL')", cine)
-    if seq.n_frames < 2:
-        raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
     start = load_init(init, cine, None, None, seq.shape)
     check_init(start, seq.shape, str(init))
     solids = _solids_from_files(setup, exclude, bar, seq.frames[0])
