@@ -135,6 +135,8 @@ class ReducedFriction:
         # each (voxel, candidate corner) pair's normal viscous force per unit μ and q̇: one
         # (pairs × r) product a step, summed per candidate
         per_voxel = np.matmul(blocks, v[edofs])                                 # (voxels, 24, r)
+        # (a node near two solids — a floor–wall corner — gets its viscous part on its last
+        # candidate only; its elastic and body parts on both)
         position = np.full(len(settled), -1)
         position[self.nodes] = np.arange(len(self.nodes))
         corner = position[m.elements[self.voxels]]                              # (voxels, 8)
