@@ -36,6 +36,7 @@ Usage (run it alone: parallel jobs slow each other's timings)::
     python benchmarks/bench_online.py --quick
     python benchmarks/bench_online.py                          # the four twins, 4,399 particles
     python benchmarks/bench_online.py --twin DIR
+    python benchmarks/bench_online.py --reference-sensitivity --cases oblique_s44   # is the reference converged?
 """
 
 from __future__ import annotations
@@ -195,6 +196,34 @@ def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
                                                                    and np.percentile(lat, 99) + track_ms <= 50)}}
 
 
+def reference_sensitivity(twin: Path, particles: int, scales=(1.0, 2.0)) -> dict:
+    """How converged the implicit path itself is: at F/E × ``scales``, the points' motion at the
+    default step tolerance against half of it and against twice the stick's reach ε (the
+    same error measure as the reduced model's; a reference that moves by more than 3 % under
+    its own numerical settings cannot judge a reduced model to 3 %)."""
+    from dataclasses import replace
+
+    from hifumotion.creep.integrate import CreepSettings
+    from hifumotion.estimation.model import run_model
+
+    observed, _, _, k, implicit, _ = _twin_models(twin, particles)
+    last = len(observed.frames) - 1
+    base = implicit.settings.creep or CreepSettings()
+    variants = {"half_tolerance": replace(base, tolerance=base.tolerance / 2),
+                "twice_stick": replace(base, stick_mm=base.stick_mm * 2)}
+    rows = []
+    for scale in scales:
+        ks = k.replaced(force_n=k.force_n * scale)
+        ref = run_model(implicit, ks, last).points_mm
+        row = {"force_over_youngs_scale": scale}
+        for name, creep in variants.items():
+            spec = replace(implicit, settings=replace(implicit.settings, creep=creep))
+            error, motion = point_error(run_model(spec, ks, last).points_mm, ref)
+            row[f"{name}_change_over_motion"] = round(error / motion, 5) if motion > 0 else None
+        rows.append(row)
+    return {"twin": twin.name, "particles": int(len(implicit.tissue_mm)), "reference_sensitivity": rows}
+
+
 def main() -> None:
     from _estimation_twins import CASES, twin_folder
 
@@ -205,7 +234,19 @@ def main() -> None:
     ap.add_argument("--particles", type=int, default=None, help="tissue particles (default 4,399; --quick 1,000)")
     ap.add_argument("--work", type=Path, default=ROOT / ".bench" / "twins")
     ap.add_argument("--online", action="store_true", help="the online loop on the push_change twins instead")
+    ap.add_argument("--reference-sensitivity", action="store_true",
+                    help="instead: how much the implicit path's own motion changes at half its step tolerance "
+                         "and twice its stick reach (F/E × 1 and × 2)")
     args = ap.parse_args()
+    if args.reference_sensitivity:
+        names = args.cases.split(",") if args.cases else list(CASES)
+        if args.quick and not args.cases:
+            names = names[:1]
+        particles = args.particles or (1000 if args.quick else 4399)
+        twins = [args.twin] if args.twin is not None else [twin_folder(args.work, n) for n in names]
+        for t in twins:
+            print(json.dumps(reference_sensitivity(t, particles)), flush=True)
+        return
     if args.online:
         names = args.cases.split(",") if args.cases else [c for c in CASES if c.startswith("push_change")]
         if args.quick and not args.cases:
