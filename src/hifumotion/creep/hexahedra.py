@@ -286,6 +286,13 @@ class MeshMatrices:
         self.mask = np.zeros(len(self.elements), bool)
         self.mask[self.regular] = True
 
+    def own_blocks(self, voxels: np.ndarray) -> np.ndarray:
+        """Where each of ``voxels`` has its own blocks in ``dev``/``vol``/``visc``/``b0`` (−1: an
+        exact cube, which takes :attr:`cube`'s)."""
+        which = np.full(len(self.elements), -1)
+        which[self.distorted] = np.arange(len(self.distorted))
+        return which[np.asarray(voxels)]
+
     def matrix(self, deviatoric: np.ndarray | float, volumetric: np.ndarray | float, viscous: np.ndarray | float
                ) -> sp.csr_matrix:
         """``Σ_e 2G_e·dev_e + κ_e·vol_e + μ_e·visc_e`` (scales per element or scalars, SI)."""

@@ -37,9 +37,7 @@ def rate_modes(matrices, node_modes_m: np.ndarray, voxels: np.ndarray) -> np.nda
     elements = matrices.elements[voxels]
     dofs = (3 * elements[:, :, None] + np.arange(3)).reshape(len(voxels), 24)
     b0 = np.broadcast_to(matrices.cube.centre_b, (len(voxels), 6, 24)).copy()
-    which = np.full(len(matrices.elements), -1)
-    which[matrices.distorted] = np.arange(len(matrices.distorted))
-    own = which[voxels]
+    own = matrices.own_blocks(voxels)
     b0[own >= 0] = matrices.b0[own[own >= 0]]
     return np.ascontiguousarray(np.matmul(b0, node_modes_m[dofs].reshape(len(voxels), 24, r)))
 

@@ -128,9 +128,7 @@ class ReducedFriction:
         self.voxels = np.flatnonzero(touching)
         edofs = (3 * m.elements[self.voxels][:, :, None] + np.arange(3)).reshape(len(self.voxels), 24)
         blocks = np.broadcast_to(m.cube.viscous, (len(self.voxels), 24, 24)).copy()
-        which = np.full(len(m.elements), -1)
-        which[m.distorted] = np.arange(len(m.distorted))     # a distorted voxel's own block
-        own = which[self.voxels]
+        own = m.own_blocks(self.voxels)                       # a distorted voxel's own block
         blocks[own >= 0] = m.visc[own[own >= 0]]
         # each (voxel, candidate corner) pair's normal viscous force per unit μ and q̇: one
         # (pairs × r) product a step, summed per candidate

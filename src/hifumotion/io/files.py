@@ -162,15 +162,14 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
             if not (final / RUN_INFO).is_file():
                 raise InputError(f"was not written by hifumotion (it has no {RUN_INFO}); --overwrite only replaces "
                                  "hifumotion's own output folders — choose a new one", folder)
-            _refuse_foreign(final, folder)
+            _refuse_foreign(foreign_contents(final), folder)
     return folder
 
 
-def _refuse_foreign(final: Path, shown: Path) -> None:
-    """Raise when ``final`` holds anything its run did not write (``--overwrite`` would delete it).
-    A folder whose ``run_info.json`` lists nothing (an older version's) passes: it is kept aside,
-    not deleted (:func:`output_folder`)."""
-    foreign = foreign_contents(final)
+def _refuse_foreign(foreign: list[str] | None, shown: Path) -> None:
+    """Raise when a folder holds ``foreign`` files (:func:`foreign_contents`): ``--overwrite``
+    would delete them. None (an older version's folder, which lists nothing) passes: it is
+    kept aside, not deleted (:func:`output_folder`)."""
     if foreign:
         named = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
         raise InputError(f"holds files hifumotion did not write ({named}); --overwrite never deletes them — move them "
@@ -215,18 +214,20 @@ def output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Itera
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+    if final.exists() and not any(final.iterdir()):
+        final.rmdir()                     # an empty folder the user made for the run
     if final.exists():
-        if any(final.iterdir()):
-            try:
-                # a file put there while the run was going is not the run's to delete
-                _refuse_foreign(final, shown)
-            except InputError as exc:
-                kept = final.with_name(f"{final.name}.new-{uuid.uuid4().hex[:8]}")
-                staging.rename(kept)
-                raise InputError(f"{exc.reason}; this run's output is in {kept}", shown) from None
-        unlisted = foreign_contents(final) is None
+        foreign = foreign_contents(final)
+        try:
+            # a file put there while the run was going is not the run's to delete
+            _refuse_foreign(foreign, shown)
+        except InputError as exc:
+            kept = final.with_name(f"{final.name}.new-{uuid.uuid4().hex[:8]}")
+            staging.rename(kept)
+            raise InputError(f"{exc.reason}; this run's output is in {kept}", shown) from None
         # a folder that does not list what hifumotion wrote may hold the user's files too: it is
         # kept aside, visible, rather than deleted
+        unlisted = foreign is None
         retired = final.with_name(f"{final.name}.replaced-{uuid.uuid4().hex[:8]}" if unlisted
                                   else f".{final.name}.old-{uuid.uuid4().hex[:8]}")
         final.rename(retired)
