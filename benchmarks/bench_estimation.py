@@ -28,6 +28,13 @@ Usage (run it alone: parallel jobs slow each other's timings)::
     python benchmarks/bench_estimation.py                      # every case, every method
     python benchmarks/bench_estimation.py --cases slow_push_s42 --methods least_squares
     python benchmarks/bench_estimation.py --twin DIR           # one existing twin (observed/ + truth/)
+    python benchmarks/bench_estimation.py --quick              # slow_push_s42, least squares
+    python benchmarks/bench_estimation.py --methods least_squares --compare-search   # reduced vs implicit search
+
+``--compare-search`` calibrates each twin a second time with the other search model
+(``CalibrationSettings.search_integrator``: the search model's reduced model or its full
+runs) and reports issue 39's calibration targets: ≤ 30 s, and a validation DSC within
+0.001 and a centroid within 0.01 mm of the implicit search's fit.
 
 Twins are generated once into ``--work`` (default ``.bench/twins``; 4–8 min each) and
 re-used.
@@ -51,6 +58,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 DSC_MEAN, DSC_MIN, CENTROID_MM = 0.97, 0.95, 0.3
 PARAMETER_REL, POISSON_ABS = 0.10, 0.03
 CALIBRATION_S, PREDICT_SPEEDUP = 120.0, 10.0
+#: issue 39's: calibration on the reduced search model, its fit as good as the implicit search's
+REDUCED_CALIBRATION_S, FIT_DSC, FIT_CENTROID_MM = 30.0, 0.001, 0.01
 
 
 def _expert_contours(truth: Path, frames: list[int], out: Path) -> Path:
@@ -112,6 +121,7 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
     window_s = (valid[-1] - valid[0]) * observed.frame_interval_s
     return {
         "calibration_s": cal_s, "calibration_timings_s": cal.timings_s, "runs": cal.runs, "objective": cal.objective,
+        "calibration_settings": {"search_integrator": cal.search_spec.settings.integrator},
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
         "degeneracy": cal.degeneracy, "space_mapping": cal.mapped,
         "physics": ev.physics, "baselines_validation": ev.baselines, "online": ev.online,
@@ -193,16 +203,51 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
     out = {"twin": str(twin), "protocol": protocol, "motion": motion, "boundary_offset_mm": offset_mm,
            "prepare_s": prep_s, "training_frames": train, "validation_frames": valid,
            "ncc_validation": ncc_validation(observed, obs, truth, valid), "methods": {}}
+    horizons = [int(h) for h in args.horizons.split(",")]
     for method in args.methods.split(","):
         r = calibrate_and_predict(observed, obs, train, valid, truth, params, method, args.workers,
-                                  [int(h) for h in args.horizons.split(",")], tmp, _settings(args.set))
+                                  horizons, tmp, _settings(args.set))
         r["targets"] = targets(protocol, r)
         out["methods"][method] = r
-        v = r["physics"]["validation"]
-        print(f"{twin.name} {method}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm, "
-              f"F/E {r['recovered']['force_over_youngs_m2']['rel_error']:+.0%}, {r['calibration_s']:.0f} s",
-              file=sys.stderr, flush=True)
+        _tell(twin.name, method, r)
+        if args.compare_search:
+            # the same calibration with the other search model, in the same run: issue 39's
+            # calibration target (≤ 30 s, the fit as good as the implicit search's)
+            ours = r["calibration_settings"]["search_integrator"]
+            other = "implicit" if ours == "reduced" else "reduced"
+            peer = calibrate_and_predict(observed, obs, train, valid, truth, params, method, args.workers, horizons,
+                                         tmp, {**_settings(args.set), "search_integrator": other})
+            _tell(twin.name, f"{method} ({other} search)", peer)
+            runs = {ours: r, other: peer}
+            out["methods"][method]["search_comparison"] = search_comparison(runs["reduced"], runs["implicit"])
     return out
+
+
+def _tell(name: str, label: str, r: dict) -> None:
+    v = r["physics"]["validation"]
+    print(f"{name} {label}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm, "
+          f"F/E {r['recovered']['force_over_youngs_m2']['rel_error']:+.0%}, {r['calibration_s']:.0f} s",
+          file=sys.stderr, flush=True)
+
+
+def search_comparison(reduced: dict, implicit: dict) -> dict:
+    """The reduced search model's calibration against the implicit one's (issue 39's targets)."""
+    vr, vi = reduced["physics"]["validation"], implicit["physics"]["validation"]
+    d_dsc = vr["dsc_mean"] - vi["dsc_mean"]
+    d_centroid = vr["centroid_mean_mm"] - vi["centroid_mean_mm"]
+    return {
+        "calibration_s": {"reduced": reduced["calibration_s"], "implicit": implicit["calibration_s"],
+                          "speedup": implicit["calibration_s"] / reduced["calibration_s"]},
+        "timings_s": {"reduced": reduced["calibration_timings_s"], "implicit": implicit["calibration_timings_s"]},
+        "validation": {"reduced": {k: vr[k] for k in ("dsc_mean", "dsc_min", "centroid_mean_mm")},
+                       "implicit": {k: vi[k] for k in ("dsc_mean", "dsc_min", "centroid_mean_mm")}},
+        "dsc_mean_difference": d_dsc, "centroid_difference_mm": d_centroid,
+        "fitted": {"reduced": reduced["fitted"], "implicit": implicit["fitted"]},
+        "targets": {f"calibration<={REDUCED_CALIBRATION_S:.0f}s": reduced["calibration_s"] <= REDUCED_CALIBRATION_S,
+                    # "as good as": no worse than the implicit search's fit by more than the margins
+                    f"dsc_within_{FIT_DSC}": d_dsc >= -FIT_DSC,
+                    f"centroid_within_{FIT_CENTROID_MM}mm": d_centroid <= FIT_CENTROID_MM},
+    }
 
 
 def main() -> None:
@@ -220,7 +265,13 @@ def main() -> None:
     ap.add_argument("--set", default="", help="CalibrationSettings fields to change, e.g. "
                     "'quality_weights=true,bar_motion=false' (to measure an option against the defaults)")
     ap.add_argument("--no-bar-cap", action="store_true", help="do not continue the sweep's top under the bar")
+    ap.add_argument("--compare-search", action="store_true",
+                    help="also calibrate with the other search model (reduced/implicit) and compare (issue 39)")
+    ap.add_argument("--quick", action="store_true",
+                    help="one twin (slow_push_s42), least squares only: a few minutes once the twin exists")
     args = ap.parse_args()
+    if args.quick:
+        args.cases, args.methods = "slow_push_s42", "least_squares"
     try:
         _settings(args.set)
     except ValueError as exc:

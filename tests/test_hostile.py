@@ -106,6 +106,38 @@ def build_scratch(root: Path) -> Path:
     (root / "run_tip.toml").write_text(_run_config(tip="[500.0, 19.0, 18.7]"))
     (root / "run_key.toml").write_text(_run_config(extra="\n[estimation]\nparticels = 300\n"))
     (root / "run_particles.toml").write_text(_run_config(extra="\n[estimation]\nparticles = 1000000000\n"))
+    # nested thousands of levels (a RecursionError in any parser), a few hundred (past the parser)
+    deep = "[" * 5000 + "]" * 5000
+    (root / "deep_scene.toml").write_text(f"a = {deep}\n")
+    (root / "deep_run.yaml").write_text(f"a: {deep}\n")
+    (root / "deep_init.json").write_text(deep)
+    (root / "deep_resume.jsonl").write_text(deep + "\n")
+    (root / "observed_deep").mkdir()
+    (root / "observed_deep" / "setup.json").write_text('{"a": ' + deep + "}")
+    (root / "scene_nested.toml").write_text("[bar]\nforce_n = " + "[" * 200 + "]" * 200 + "\n")
+    (root / "scene_digits.toml").write_text("[bar]\nforce_n = " + "9" * 5000 + "\n")
+    (root / "scene_interval.toml").write_text("[run]\noutput_interval_s = 1e-12\n")
+    (root / "scene_duration.toml").write_text("[run]\nduration_s = 1e9\n")
+    (root / "scene_steps.toml").write_text("[run]\nduration_s = 5000.0\noutput_interval_s = 1.0\nmax_step_s = 1e-9\n")
+    (root / "twin_seed.toml").write_text("seed = -5\n")
+    (root / "twin_frames.toml").write_text("[imaging]\nframes = 100000000\n")
+    os.symlink("loop", root / "loop")                      # a symbolic link to itself
+    # headers whose data file is a device, a FIFO or some other file of the system
+    meta = "ObjectType = Image\nNDims = 2\nDimSize = 8 8\nElementType = MET_UCHAR\nElementSpacing = 0.2 0.2\n"
+    (root / "urandom.mhd").write_text(meta + "ElementDataFile = /dev/urandom\n")
+    (root / "system.mhd").write_text(meta + f"ElementDataFile = {Path(__file__).resolve()}\n")
+    (root / "fifo_data.mhd").write_text(meta + "ElementDataFile = fifo.png\n")
+    (root / "urandom.nhdr").write_text("NRRD0004\ntype: uint8\ndimension: 2\nsizes: 8 8\nencoding: raw\n"
+                                       "data file: /dev/urandom\n")
+    # DICOM attributes malformed as they are in the wild
+    _dicom(root / "spacing_abc.dcm", PixelSpacing=[0.25, 0.25], FrameTime=50.25, patch={"0.25\\0.25": "abc\\0.25 "})
+    _dicom(root / "spacing_one.dcm", PixelSpacing=[0.25, 0.25], FrameTime=50.25, patch={"0.25\\0.25": "0.25     "})
+    _dicom(root / "frametime_fast.dcm", PixelSpacing=[0.25, 0.25], FrameTime=50.25, patch={"50.25 ": "fast  "})
+    for k in range(3):
+        _dicom(root / "orientation3" / f"s{k}.dcm", frames=1, PixelSpacing=[0.25, 0.25], ImagePositionPatient=[0, 0, k],
+               ImageOrientationPatient=[1, 0, 0, 0, 1, 0], patch={"1.0\\0.0\\0.0\\0.0\\1.0\\0.0": "1.0\\0.0\\0.0            "})
+        _dicom(root / "instance_x" / f"s{k}.dcm", frames=1, PixelSpacing=[0.25, 0.25], InstanceNumber=k + 10,
+               patch={b"\x13\x00IS\x02\x00" + str(k + 10).encode(): b"\x13\x00IS\x02\x00x "})
     bad_setup = root / "observed_bad"
     bad_setup.mkdir()
     (bad_setup / "setup.json").write_text("{ broken")
@@ -113,6 +145,37 @@ def build_scratch(root: Path) -> Path:
     missing_field.mkdir()
     (missing_field / "setup.json").write_text(json.dumps({"frame_interval_s": 0.05, "frames": 10}))
     return root
+
+
+def _dicom(path: Path, frames: int = 3, patch: dict | None = None, **attrs) -> None:
+    """A small ultrasound DICOM; ``patch`` {valid text: malformed text of the same length} edits its
+    bytes (pydicom refuses to write malformed values, scanners do not)."""
+    from pydicom.dataset import Dataset, FileMetaDataset
+    from pydicom.uid import ExplicitVRLittleEndian, generate_uid
+
+    meta = FileMetaDataset()
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    meta.MediaStorageSOPClassUID = "1.2.840.10008.5.1.4.1.1.3.1"
+    meta.MediaStorageSOPInstanceUID = generate_uid()
+    ds = Dataset()
+    ds.file_meta = meta
+    ds.SOPClassUID, ds.SOPInstanceUID, ds.Modality = meta.MediaStorageSOPClassUID, meta.MediaStorageSOPInstanceUID, "US"
+    ds.Rows = ds.Columns = 40
+    ds.SamplesPerPixel, ds.PhotometricInterpretation = 1, "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 8, 8, 7, 0
+    if frames > 1:
+        ds.NumberOfFrames = frames
+    ds.PixelData = (np.random.default_rng(frames).random((frames, 40, 40)) * 255).astype(np.uint8).tobytes()
+    for key, value in attrs.items():
+        setattr(ds, key, value)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ds.save_as(path, enforce_file_format=True)
+    raw = path.read_bytes()
+    for valid, malformed in (patch or {}).items():
+        valid, malformed = (x.encode() if isinstance(x, str) else x for x in (valid, malformed))
+        assert len(valid) == len(malformed) and raw.count(valid) == 1
+        raw = raw.replace(valid, malformed)
+    path.write_bytes(raw)
 
 
 def _run_config(tip: str = "[22.6, 19.0, 18.7]", extra: str = "") -> str:
@@ -287,6 +350,42 @@ CASES = [
     (["run", "run_key.toml", "-o", "out"], "particels"),
     (["run", "run_particles.toml", "-o", "out"], "particles"),
     (["run", "fifo.png", "-o", "out"], "fifo.png"),
+    # nesting thousands of levels deep, or a few hundred, in every structured file a command reads
+    (["simulate", "deep_scene.toml", "-o", "out"], "deep_scene.toml"),
+    (["simulate", "scene_nested.toml", "-o", "out"], "scene_nested.toml"),
+    (["experiment", "--config", "deep_scene.toml", "-o", "out"], "deep_scene.toml"),
+    (["run", "deep_run.yaml", "-o", "out"], "deep_run.yaml"),
+    (["track", "observed_deep", "-o", "out"], "setup.json"),
+    (["calibrate", "observed_deep", "-o", "out"], "setup.json"),
+    (["segment", "ph/images/phantom.png", "--init", "deep_init.json", "-o", "out"], "deep_init.json"),
+    (["calibrate", "ph", "-o", "out", "--resume", "deep_resume.jsonl"], "deep_resume.jsonl"),
+    # numbers no setting holds, and work no run could finish
+    (["simulate", "scene_digits.toml", "-o", "out"], "scene_digits.toml"),
+    (["simulate", "scene_interval.toml", "-o", "out"], "output_interval_s"),
+    (["simulate", "scene_duration.toml", "-o", "out"], "duration_s"),
+    (["simulate", "scene_steps.toml", "-o", "out"], "max_step_s"),
+    (["simulate", "scene_interval.toml", "--integrator", "implicit", "-o", "out"], "output_interval_s"),
+    (["experiment", "--config", "twin_seed.toml", "-o", "out"], "seed"),
+    (["experiment", "--config", "twin_frames.toml", "-o", "out"], "frames"),
+    # an output path that is a symbolic link to itself
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "loop"], "loop"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "loop/sub"], "loop"),
+    (["phantom", "-o", "loop"], "loop"),
+    (["calibrate", "ph", "-o", "out", "--scheduler-address", "garbage"], "--scheduler-address"),
+    (["calibrate", "ph", "-o", "out", "--scheduler-address", "tcp://host:99999"], "--scheduler-address"),
+    # a header's data file: a device, a FIFO, a file of the system
+    (["info", "urandom.mhd"], "urandom"),
+    (["info", "system.mhd"], "system.mhd"),
+    (["info", "fifo_data.mhd"], "fifo"),
+    (["info", "urandom.nhdr"], "urandom"),
+    (["segment", "urandom.mhd", "--init", "ph/init.json", "-o", "out"], "urandom"),
+    (["track", "urandom.mhd", "--init", "mask40.png", "-o", "out"], "urandom"),
+    # malformed DICOM attributes: no pixel size is guessed from them, no sweep order
+    (["track", "spacing_abc.dcm", "--init", "mask40.png", "-o", "out"], "--spacing"),
+    (["track", "spacing_one.dcm", "--init", "mask40.png", "-o", "out"], "--spacing"),
+    (["info", "orientation3"], "ImageOrientationPatient"),
+    (["reconstruct", "orientation3", "-o", "out"], "ImageOrientationPatient"),
+    (["info", "instance_x"], "InstanceNumber"),
 ]
 
 
@@ -321,10 +420,36 @@ def test_overwrite_replaces_only_what_hifumotion_wrote(scratch, monkeypatch):
     assert (scratch / "notes" / "keep.txt").read_text() == "a user's own file\n"
 
 
+def test_a_malformed_dicom_attribute_is_reported_not_guessed(scratch, monkeypatch):
+    """A file with a malformed pixel size or frame time still opens; the value is unknown, the
+    attribute named; given on the command line, it is used."""
+    from hifumotion.io.reader import read_sequence
+
+    monkeypatch.chdir(scratch)
+    seq = read_sequence(scratch / "spacing_abc.dcm")
+    assert not seq.spacing_known and "PixelSpacing" in seq.metadata["spacing_from"]
+    assert seq.frame_interval_s == pytest.approx(0.05025)
+    seq = read_sequence(scratch / "frametime_fast.dcm")
+    assert seq.frame_interval_s is None and "FrameTime" in seq.metadata["frame_interval_from"]
+    assert seq.spacing_mm == (0.25, 0.25)
+    seq = read_sequence(scratch / "spacing_one.dcm", spacing_mm=0.3)
+    assert seq.spacing_mm == (0.3, 0.3)
+
+
 def test_info_prints_its_table_on_standard_output(scratch):
     proc = subprocess.run(CLI + ["info", str(scratch / "image.png"), "--spacing", "0.2"], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0 and "spacing_mm" in proc.stdout and "spacing_mm" not in proc.stderr
+
+
+@pytest.mark.parametrize("argv", [["info", "instance_x"], ["info", "spacing_abc.dcm", "--frame-interval", "nan"],
+                                  ["info", "urandom.mhd"], ["simulate", "deep_scene.toml", "-o", "out"],
+                                  ["calibrate", "ph", "-o", "out", "--scheduler-address", "garbage"]])
+def test_a_libraries_warnings_do_not_add_to_the_one_line(scratch, argv):
+    """In a real process (warnings and logging go to standard error there, not to pytest)."""
+    proc = subprocess.run(CLI + argv, cwd=scratch, capture_output=True, text=True, timeout=120)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), proc.stderr
 
 
 def test_a_fifo_is_refused_at_once(scratch):
@@ -344,3 +469,81 @@ def test_sigterm_leaves_no_partial_folder(tmp_path):
     _, err = proc.communicate(timeout=120)
     assert proc.returncode != 0
     assert not list(tmp_path.glob(".twin*")) and not (tmp_path / "twin").exists(), err
+
+
+def test_a_frame_range_is_checked_by_its_ends_before_any_list_is_made():
+    from hifumotion.errors import InputError
+    from hifumotion.estimation.protocol import parse_frames
+
+    assert parse_frames("20:101:10", 200, "--frames") == list(range(20, 101, 10))
+    assert parse_frames("30,20,20", 200, "--frames") == [20, 30]
+    for text, word in (("1:2:3:4", "expected"), ("1:150000000", "1 … 199"), ("5:1", "no frame"),
+                       ("0:4", "1 … 199"), ("1:10:0", "expected"), ("9" * 5000, "expected"), ("-4,0", "1 … 199")):
+        with pytest.raises(InputError, match=word) as caught:
+            parse_frames(text, 200, "--frames")
+        assert len(str(caught.value)) < 200          # the message quotes the input, it does not list it
+
+
+def test_valid_detached_headers_still_read(tmp_path):
+    """The data-file check refuses devices and foreign files, not SimpleITK's own MHD and NRRD."""
+    import SimpleITK as sitk
+
+    from hifumotion.io.itk import read_itk_file
+
+    rng = np.random.default_rng(3)
+    for name, compressed, dtype in (("a.mhd", False, np.uint8), ("b.mhd", True, np.float32),
+                                    ("c.nhdr", False, np.int16), ("d.nhdr", True, np.uint16)):
+        array = (rng.random((3, 20, 30)) * 100).astype(dtype)
+        image = sitk.GetImageFromArray(array)
+        image.SetSpacing((0.2, 0.2, 1.0))
+        sitk.WriteImage(image, str(tmp_path / name), useCompression=compressed)
+        read = read_itk_file(tmp_path / name)["array"]
+        assert read.shape == (3, 20, 30)
+
+
+def test_nesting_depth_is_counted_without_recursion():
+    from hifumotion.io.structured import MAX_DEPTH, nesting_depth
+
+    assert nesting_depth(3.0) == 0 and nesting_depth({"a": [1, 2]}) == 2
+    deep: list = []
+    for _ in range(10_000):
+        deep = [deep]
+    assert nesting_depth(deep) == MAX_DEPTH + 1      # stops counting past the limit
+
+
+def test_a_killed_runs_staging_folder_is_removed_by_the_next_run(tmp_path):
+    """A SIGKILLed run leaves its hidden staging folder; the next run into the same output removes
+    it (its process is gone) and leaves a live run's, an older version's and the user's alone."""
+    from hifumotion.io.files import output_folder
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".out.{dead.pid}.abc123.partial"
+    live = tmp_path / f".out.{os.getpid()}.def456.partial"
+    older = tmp_path / ".out.xyz789.partial"
+    user = tmp_path / ".out.notes"
+    for folder in (stale, live, older, user):
+        folder.mkdir()
+        (folder / "file.txt").write_text("x")
+    with output_folder(tmp_path / "out") as staging:
+        (staging / "result.txt").write_text("done")
+    assert not stale.exists()
+    assert live.exists() and older.exists() and user.exists()
+    assert (tmp_path / "out" / "result.txt").read_text() == "done"
+
+
+def test_sigkill_then_the_same_command_leaves_no_staging_folder(tmp_path):
+    proc = subprocess.Popen(CLI + ["-q", "experiment", "--preset", "small", "--seed", "5", "-o", "twin"],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 90
+    while time.time() < deadline and not list(tmp_path.glob(".twin.*.partial")):
+        time.sleep(0.2)
+    assert list(tmp_path.glob(".twin.*.partial")), "the run never started writing"
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert list(tmp_path.glob(".twin.*.partial"))                  # what SIGKILL leaves
+    # the next run into the same folder clears it before it starts
+    again = subprocess.run(CLI + ["phantom", "--size", "64", "-o", "twin"], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=120)
+    assert again.returncode == 0, again.stderr
+    assert not list(tmp_path.glob(".twin.*.partial"))

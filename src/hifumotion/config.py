@@ -8,11 +8,9 @@ the field.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from hifumotion.errors import InputError
@@ -50,19 +48,19 @@ class ReadOptions(ConfigModel):
 
 def read_config_file(path: str | Path) -> dict[str, Any]:
     """The raw mapping in a ``.toml``, ``.yaml`` or ``.yml`` file."""
-    from hifumotion.io.files import require_regular_file
+    from hifumotion.io.structured import read_structured
 
-    p = require_regular_file(path, "configuration file")
+    p = Path(path)
     suffix = p.suffix.lower()
-    try:
-        if suffix == ".toml":
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-        elif suffix in (".yaml", ".yml"):
-            data = yaml.safe_load(p.read_text(encoding="utf-8")) or {}
-        else:
-            raise InputError(f"unsupported configuration format '{suffix}'; expected .toml, .yaml or .yml", p)
-    except (tomllib.TOMLDecodeError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot parse ({' '.join(str(exc).split())})", p) from None
+    if suffix == ".toml":
+        data = read_structured(p, "toml", "configuration file")
+    elif suffix in (".yaml", ".yml"):
+        data = read_structured(p, "yaml", "configuration file") or {}
+    else:
+        from hifumotion.io.files import require_regular_file
+
+        require_regular_file(p, "configuration file")
+        raise InputError(f"unsupported configuration format '{suffix}'; expected .toml, .yaml or .yml", p)
     if not isinstance(data, dict):
         raise InputError("expected a table of settings at the top level", p)
     return data

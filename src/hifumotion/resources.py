@@ -15,6 +15,11 @@ from hifumotion.errors import InputError
 
 #: Part of the available memory one request may take: the rest is for everything else.
 USABLE_FRACTION = 0.8
+#: Most frames one run records or images. A run's frames are all held in memory (the particles'
+#: trajectories, the images) and each costs solver steps: 10⁵ is 83 min at 20 frames/s, far
+#: beyond any push the model describes, and a 10⁻¹² s interval or a 10⁹ s run is refused by it
+#: before anything is allocated.
+MAX_FRAMES = 100_000
 
 
 def available_memory_bytes() -> int:
@@ -68,4 +73,4 @@ def check_memory(estimate_bytes: float, what: str, field: str) -> None:
                          f"{format_bytes(free)} is free; choose a coarser setting", field)
 
 
-__all__ = ["available_memory_bytes", "check_memory", "format_bytes", "USABLE_FRACTION"]
+__all__ = ["available_memory_bytes", "check_memory", "format_bytes", "MAX_FRAMES", "USABLE_FRACTION"]

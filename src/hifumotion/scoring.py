@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from hifumotion.errors import InputError
+from hifumotion.io.structured import read_structured
 from hifumotion.metrics import centroid_distance, dice, hausdorff
 
 #: The paper's protocol (Section 3.2): ground truth every 10th frame from the 20th.
@@ -143,6 +143,6 @@ def pixel_size_mm(truth_dir: str | Path) -> float:
     if not path.is_file():
         raise InputError("no parameters.json to take the pixel size from; give --spacing", truth_dir)
     try:
-        return float(json.loads(path.read_text())["config"]["imaging"]["pixel_mm"])
-    except (KeyError, TypeError, ValueError, json.JSONDecodeError):
+        return float(read_structured(path, "json", "parameters.json")["config"]["imaging"]["pixel_mm"])
+    except (KeyError, TypeError, ValueError):
         raise InputError("expected config.imaging.pixel_mm", path) from None

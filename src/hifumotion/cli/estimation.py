@@ -36,7 +36,7 @@ def calibrate(
     from hifumotion.config import validate_config
     from hifumotion.console import StageBars
     from hifumotion.estimation.calibrate import OBJECTIVES
-    from hifumotion.estimation.evaluator import check_search_log
+    from hifumotion.estimation.evaluator import check_search_log, scheduler_address_problem
     from hifumotion.estimation.protocol import default_frames, parse_frames
     from hifumotion.io import output_folder
     from hifumotion.observed import load_observed
@@ -49,6 +49,8 @@ def calibrate(
         raise InputError(f"expected {', '.join(OBJECTIVES)}, got {objective!r}", "--objective")
     if tracking not in ("speckle", "glcv"):
         raise InputError(f"expected speckle or glcv, got {tracking!r}", "--tracking")
+    if scheduler_address is not None and (problem := scheduler_address_problem(scheduler_address)):
+        raise InputError(problem, "--scheduler-address")
     if resume is not None:
         check_search_log(resume)
     observed = load_observed(observed_dir)

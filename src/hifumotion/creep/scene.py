@@ -169,21 +169,38 @@ def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Cal
     return sim
 
 
-def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, settings=None,
-                  progress: Callable[[float], None] | None = None, creep: CreepSettings | None = None):
-    """A :class:`~.reduced.ReducedCreep` of the voxel mesh ``mesh`` whose modes are the motion of
-    full runs of ``scenes`` (the same tissue; other materials, forces; ``creep``, their settings):
-    its construction."""
+def snapshot_run(scene: Scene, mesh, tissue_volume_mm3: np.ndarray, creep: CreepSettings | None = None,
+                 progress: Callable[[float], None] | None = None) -> CreepResult:
+    """One full run of ``scene`` on the mesh ``mesh``, its nodes kept: a reduced model's snapshots
+    (one such run is a task of its own: a model's several runs may go to several cores)."""
+    runs: list[CreepResult] = []
+    simulate_creep(scene, tissue_particles=(mesh.centres_mm, tissue_volume_mm3), mesh=mesh, keep=runs,
+                   progress=progress, settings=creep)
+    return runs[0]
+
+
+def reduced_from_runs(scene: Scene, mesh, runs: list[CreepResult], settings=None,
+                      creep: CreepSettings | None = None):
+    """A :class:`~.reduced.ReducedCreep` of ``mesh`` whose modes are the motion of the full
+    ``runs`` (:func:`snapshot_run`; the first one's settled state is the model's), its
+    matrices those of ``scene``'s solver (``creep``, its settings)."""
     from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
 
     settings = settings or ReducedSettings()
-    runs: list[CreepResult] = []
+    solver, _ = creep_solver(scene, mesh, creep)
+    return ReducedCreep(solver, pod_basis(runs, settings.energy, settings.max_modes), settings)
+
+
+def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, settings=None,
+                  progress: Callable[[float], None] | None = None, creep: CreepSettings | None = None):
+    """A :class:`~.reduced.ReducedCreep` of the voxel mesh ``mesh`` whose modes are the motion of
+    full runs of ``scenes`` (the same tissue; other materials, forces; ``creep``, their settings),
+    run one after the other here: its construction."""
+    runs = []
     for i, scene in enumerate(scenes):
         tell = None if progress is None else (lambda f, i=i: progress((i + f) / len(scenes)))
-        simulate_creep(scene, tissue_particles=(mesh.centres_mm, tissue_volume_mm3), mesh=mesh, keep=runs,
-                       progress=tell, settings=creep)
-    solver, _ = creep_solver(scenes[0], mesh, creep)
-    return ReducedCreep(solver, pod_basis(runs, settings.energy, settings.max_modes), settings)
+        runs.append(snapshot_run(scene, mesh, tissue_volume_mm3, creep, tell))
+    return reduced_from_runs(scenes[0], mesh, runs, settings, creep)
 
 
 def simulate_reduced(scene: Scene, reduced, tissue_volume_mm3: np.ndarray,
@@ -201,4 +218,4 @@ def simulate_reduced(scene: Scene, reduced, tissue_volume_mm3: np.ndarray,
                              bar_centres(scene, punch, axis, result), "reduced")
 
 
-__all__ = ["simulate_creep", "reduced_creep", "simulate_reduced", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]
+__all__ = ["simulate_creep", "reduced_creep", "snapshot_run", "reduced_from_runs", "simulate_reduced", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]

@@ -3,10 +3,14 @@
 1. **Observe** (:func:`~.prepare.prepare`): segment the sweep, reconstruct, track the frames.
 2. **Model** (:func:`~.model.model_spec`): the paper's resolution (4,399 tissue
    particles) for the final model, and a coarser *search* model (1,000 by default)
-   whose runs are ~10× cheaper.
+   whose runs are ~10× cheaper; or (``search_integrator = "reduced"``) the search
+   model's reduced model (:mod:`hifumotion.creep.reduced`), ~50× cheaper again.
 3. **Search** on the search model, every batch of runs in parallel on Dask:
    the best of a small data-free initial design, then bounded least squares
-   (default), CMA-ES, or the paper's Table 1 algorithm.
+   (default), CMA-ES, or the paper's Table 1 algorithm. A reduced search model is
+   made around the design's centre (its two snapshot runs in parallel), and made
+   again around the first search's optimum, from which the search runs once more:
+   the modes are then those of the parameters the fit ends at.
 4. **Map to the paper's resolution** (output space mapping): a run of the final
    model at the search optimum; the difference of its residuals from the search
    model's is taken as fixed, and a Gauss–Newton step with the search model's
@@ -51,6 +55,10 @@ class CalibrationSettings:
     training_frames: list[int] | None = None       # default: the paper's protocol (protocol.default_frames)
     force_n: float = 0.25                           # nominal force (N): only F/E is determined
     search_particles: int = 1000                    # tissue particles of the search model
+    # the search model's integrator (ModelSettings.integrator): "reduced", the search model's
+    # POD–Galerkin model made around the design's centre and again around the first optimum
+    # (docs/decisions.md, issue 39); "implicit", its full runs
+    search_integrator: str = "implicit"
     model: ModelSettings = field(default_factory=ModelSettings)
     max_evaluations: int = 8                        # least squares: function evaluations
     cma_generations: int = 12
@@ -138,8 +146,8 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
 
     t0 = time.perf_counter()
     final = model_spec(observation, s.model)
-    search_settings = ModelSettings(**{**s.model.__dict__, "tissue_particles": min(s.search_particles,
-                                                                                     s.model.tissue_particles)})
+    search_settings = ModelSettings(**{**s.model.__dict__, "integrator": s.search_integrator,
+                                       "tissue_particles": min(s.search_particles, s.model.tissue_particles)})
     search = model_spec(observation, search_settings)
     if s.objective not in OBJECTIVES:
         raise InputError(f"unknown objective {s.objective!r}; expected {', '.join(OBJECTIVES)}", "objective")
@@ -172,16 +180,29 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     degeneracy: list = []
     with ev.cluster():
         t1 = time.perf_counter()
+        reduced = search_settings.integrator == "reduced"
+        centres = []
+        if reduced:     # the modes around the design's centre: every start is within a factor 4 of it
+            centres.append(np.mean(space.initial_design(), axis=0))
+            timings["reduced_model_s"] = ev.reduce_around(centres[-1])
         theta0, design = fitting.initial_guess(ev)
-        if s.method == "least_squares":
-            fit_result = fitting.least_squares_fit(ev, theta0, s.max_evaluations)
-            theta = fit_result.theta
-        elif s.method == "cmaes":
-            fit_result = fitting.cmaes_fit(ev, theta0, s.cma_generations, seed=s.seed)
-            theta = fit_result.theta
-        else:
-            table1 = iterative_estimate(ev, theta0, s.threshold_mm_per_point, s.table1_max_runs)
-            theta = table1.theta
+        for search_pass in range(2 if reduced else 1):
+            if search_pass:
+                # the modes again, around the first optimum: the fit ends on the model of its own parameters
+                centres.append(theta)
+                timings["reduced_model_s"] += ev.reduce_around(theta)
+                theta0 = theta
+            if s.method == "least_squares":
+                fit_result = fitting.least_squares_fit(ev, theta0, s.max_evaluations)
+                theta = fit_result.theta
+            elif s.method == "cmaes":
+                fit_result = fitting.cmaes_fit(ev, theta0, s.cma_generations, seed=s.seed)
+                theta = fit_result.theta
+            else:
+                table1 = iterative_estimate(ev, theta0, s.threshold_mm_per_point, s.table1_max_runs)
+                theta = table1.theta
+        if reduced:
+            mapped["reduced_model_centres"] = [c.tolist() for c in centres]
         timings["search_s"] = time.perf_counter() - t1
         t2 = time.perf_counter()
         unc = fitting.uncertainty(ev, theta)
@@ -215,7 +236,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
                     current = np.clip(current + np.clip(step, -limit, limit), space.lower, space.upper)
                     tell("map", len(tried) / s.mapping_runs)
             best_cost, best_theta, best_r = min(tried, key=lambda t: t[0])
-            mapped = {"theta_search": theta.tolist(), "theta_final": best_theta.tolist(),
+            mapped = {**mapped, "theta_search": theta.tolist(), "theta_final": best_theta.tolist(),
                       "cost_search_model_mm": float(np.abs(r_search).sum()),
                       "final_model_costs_mm": [c for c, _, _ in tried],
                       "cost_final_model_mm": best_cost,
@@ -256,11 +277,12 @@ def objective_for(asked: str, observation: Observation) -> str:
 def _expected_runs(s: CalibrationSettings) -> int:
     """A rough count of search runs, for the progress bar."""
     p = 4
+    passes = 2 if s.search_integrator == "reduced" else 1
     if s.method == "least_squares":
-        return 6 + s.max_evaluations * (p + 1) + 2 * p + 3
+        return 6 + passes * s.max_evaluations * (p + 1) + 2 * p + 3
     if s.method == "cmaes":
-        return 6 + s.cma_generations * (4 + int(3 * np.log(p))) + 2 * p + 3
-    return 6 + s.table1_max_runs + 2 * p + 3
+        return 6 + passes * s.cma_generations * (4 + int(3 * np.log(p))) + 2 * p + 3
+    return 6 + passes * s.table1_max_runs + 2 * p + 3
 
 
 __all__ = ["CalibrationSettings", "Calibration", "calibrate", "objective_for", "OBJECTIVES"]

@@ -33,12 +33,9 @@ from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residua
 from hifumotion.estimation.space import SearchSpace
 
 
-def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int | None = None,
-                      threads: int | None = 1) -> dict:
-    """One forward run (a Dask task): residuals (mm) of the first ``upto`` training frames.
-
-    ``threads``: Numba and MKL threads of the run (1 on a worker: the workers are the parallelism;
-    None leaves the process's setting)."""
+def _use_threads(threads: int | None) -> None:
+    """Numba and MKL threads of a task (1 on a worker: the workers are the parallelism; None
+    leaves the process's setting)."""
     if threads is not None:
         import numba
 
@@ -46,14 +43,42 @@ def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: 
 
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
         set_threads(int(threads))
+
+
+def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int | None = None,
+                      threads: int | None = 1) -> dict:
+    """One forward run (a Dask task): residuals (mm) of the first ``upto`` training frames
+    (``threads``: :func:`_use_threads`)."""
+    _use_threads(threads)
     n = len(data.frames) if upto is None else int(upto)
     run = run_model(spec, k, int(data.frames[n - 1]))
     r = residuals_mm(run.points_mm, data, n, run.bar_centre_mm)
     return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps}
 
 
+def snapshot_task(spec: ModelSpec, scene, threads: int | None = 1):
+    """One snapshot run of the spec's reduced model (a Dask task; :meth:`~.model.ModelSpec.snapshot_scenes`)."""
+    from hifumotion.creep.scene import snapshot_run
+
+    _use_threads(threads)
+    return snapshot_run(scene, spec.voxels(), spec.tissue_volume_mm3, spec.settings.creep)
+
+
 #: Residual (mm) given to a failed run at each point, so an estimator steps away from it.
 FAILED_RESIDUAL_MM = 10.0
+
+
+def scheduler_address_problem(address: str) -> str | None:
+    """Why ``address`` is not a Dask scheduler's address (``tcp://host:8786``, ``tls://…``,
+    ``host:8786``), or None when it is one."""
+    import re
+
+    m = re.fullmatch(r"(?:(tcp|tls|ucx|ws|wss)://)?(\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})", address.strip())
+    if m is None:
+        return f"expected a scheduler address such as tcp://host:8786, got {address[:60]!r}"
+    if not 0 < int(m.group(3)) < 65536:
+        return f"port {m.group(3)} is not in 1 … 65535"
+    return None
 
 
 def check_search_log(path: str | Path) -> Path:
@@ -70,6 +95,8 @@ def check_search_log(path: str | Path) -> Path:
         try:
             rec = json.loads(line)
             ok = isinstance(rec, dict) and {"theta", "upto"} <= set(rec)
+        except RecursionError:
+            ok = False      # nested thousands of levels: no search log wrote that
         except ValueError:
             ok = number == len(lines) and number > 1    # only the last line may be cut short while written
         if not ok:
@@ -78,8 +105,9 @@ def check_search_log(path: str | Path) -> Path:
     return p
 
 
-def _key(theta: np.ndarray, upto: int) -> tuple:
-    return (int(upto),) + tuple(round(float(t), 9) for t in theta)
+def _key(theta: np.ndarray, upto: int, model: str = "") -> tuple:
+    """A run's cache key: its model (:attr:`Evaluator.model_tag`), frames and θ."""
+    return (model, int(upto)) + tuple(round(float(t), 9) for t in theta)
 
 
 class Evaluator:
@@ -115,6 +143,9 @@ class Evaluator:
         self._cluster = None
         self._remote = None
         self._cores = 1   # cores a lone run may use: the local cluster's workers' (1 on a remote one)
+        # which model the runs are of: "" for the spec's own integrator; for a reduced model, the
+        # θ its modes were made around (its runs differ from another reduced model's)
+        self.model_tag = ""
         if self.log_path is not None and self.log_path.is_file():
             self._read_log()
 
@@ -126,11 +157,11 @@ class Evaluator:
                 theta = np.asarray(rec["theta"], float)
                 r = np.asarray(rec["residuals_mm"], float)
                 upto = int(rec["upto"])
-            except (ValueError, KeyError, TypeError):
+            except (ValueError, KeyError, TypeError, RecursionError):
                 continue  # a line cut short by an interruption
             if rec.get("status", "ok") != "ok":
                 continue  # a failure is not a result: run it again
-            self.cache[_key(theta, upto)] = r
+            self.cache[_key(theta, upto, str(rec.get("model", "")))] = r
             self.history.append(rec)
             self.resumed += 1
 
@@ -142,6 +173,8 @@ class Evaluator:
                "seconds": round(float(result["seconds"]), 3), "steps": int(result["steps"]),
                "residuals_mm": np.round(result["residuals_mm"], 5).tolist(),
                "status": "failed" if "error" in result else "ok"}
+        if self.model_tag:
+            rec["model"] = self.model_tag
         if "error" in result:
             rec["error"] = result["error"]
         self.history.append(rec)
@@ -156,10 +189,13 @@ class Evaluator:
         from dask.distributed import Client, LocalCluster
 
         if self.scheduler_address:
+            problem = scheduler_address_problem(self.scheduler_address)
+            if problem:
+                raise InputError(problem, "scheduler_address")
             try:
                 self._client = Client(self.scheduler_address, timeout="20s")
-            except OSError as exc:
-                raise InputError(f"cannot reach the Dask scheduler ({exc})", self.scheduler_address) from None
+            except (OSError, ValueError, TimeoutError) as exc:
+                raise InputError(f"cannot reach the Dask scheduler ({brief(exc)})", self.scheduler_address) from None
         else:
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                          dashboard_address=None,
@@ -191,6 +227,33 @@ class Evaluator:
             self.run_seconds += other.run_seconds
             other._client = other._remote = None
 
+    def reduce_around(self, theta: np.ndarray, upto: int | None = None) -> float:
+        """Make the spec's reduced model around ``θ`` (its snapshot runs in parallel on the cluster,
+        the model here), send it to the workers and run on it from now on; seconds taken.
+        Nothing to do (0 s) unless the spec's integrator is ``"reduced"``."""
+        import time
+
+        if self.spec.settings.integrator != "reduced":
+            return 0.0
+        started = time.perf_counter()
+        n = len(self.data.frames) if upto is None else int(upto)
+        last = int(self.data.frames[n - 1])
+        theta = np.clip(np.asarray(theta, float), self.space.lower, self.space.upper)
+        k = self.space.parameters(theta)
+        scenes = self.spec.snapshot_scenes(k, last)
+        threads = max(1, self._cores // len(scenes))
+        futures = [self._client.submit(snapshot_task, self._remote[0], scene, threads, pure=False) for scene in scenes]
+        try:
+            runs = self._client.gather(futures)
+        except InputError:
+            raise
+        except Exception as exc:
+            raise CalibrationFailed(f"the reduced model's snapshot runs at {k} failed ({brief(exc)})") from None
+        self.spec.adopt_reduced(k, last, runs)
+        self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
+        self.model_tag = "reduced@" + ",".join(f"{x:.9g}" for x in theta)
+        return time.perf_counter() - started
+
     # -- evaluation -----------------------------------------------------------
     def residuals(self, thetas: Iterable[np.ndarray], upto: int | None = None) -> list[np.ndarray]:
         """``(n, M)`` residuals (mm) for each θ (runs missing from the cache go to Dask together)."""
@@ -198,7 +261,7 @@ class Evaluator:
         thetas = [np.clip(np.asarray(t, float), self.space.lower, self.space.upper) for t in thetas]
         missing = {}
         for t in thetas:
-            key = _key(t, n)
+            key = _key(t, n, self.model_tag)
             if key not in self.cache and key not in missing:
                 missing[key] = t
         if missing:
@@ -211,8 +274,9 @@ class Evaluator:
                     failed[key] = result["residuals_mm"]
                 else:
                     self.cache[key] = result["residuals_mm"]
-            return [failed[_key(t, n)] if _key(t, n) in failed else self.cache[_key(t, n)] for t in thetas]
-        return [self.cache[_key(t, n)] for t in thetas]
+            keys = [_key(t, n, self.model_tag) for t in thetas]
+            return [failed[key] if key in failed else self.cache[key] for key in keys]
+        return [self.cache[_key(t, n, self.model_tag)] for t in thetas]
 
     def _submit(self, ks: list[Parameters], n: int) -> list[dict]:
         """Run the parameter sets on the cluster; results in the order asked."""

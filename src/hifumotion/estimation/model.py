@@ -143,9 +143,23 @@ class ModelSpec:
                 return model
         from hifumotion.creep.scene import reduced_creep
 
-        scenes = [scene_for(self, k.replaced(force_n=k.force_n * f), last_frame) for f in self.settings.reduced_span]
-        model = reduced_creep(scenes, self.voxels(), self.tissue_volume_mm3, self.settings.reduced,
-                              progress=progress, creep=self.settings.creep)
+        model = reduced_creep(self.snapshot_scenes(k, last_frame), self.voxels(), self.tissue_volume_mm3,
+                              self.settings.reduced, progress=progress, creep=self.settings.creep)
+        self._reduced = (model, k, last_frame)
+        return model
+
+    def snapshot_scenes(self, k: "Parameters", last_frame: int) -> list:
+        """The scenes whose full runs make the reduced model around ``k`` (F/E × ``reduced_span``)."""
+        return [scene_for(self, k.replaced(force_n=k.force_n * f), last_frame) for f in self.settings.reduced_span]
+
+    def adopt_reduced(self, k: "Parameters", last_frame: int, runs: list) -> object:
+        """Make and keep the reduced model around ``k`` from its snapshot runs made elsewhere
+        (:func:`~hifumotion.creep.scene.snapshot_run` of each of :meth:`snapshot_scenes`, e.g. on a
+        cluster's cores)."""
+        from hifumotion.creep.scene import reduced_from_runs
+
+        scenes = self.snapshot_scenes(k, last_frame)
+        model = reduced_from_runs(scenes[0], self.voxels(), runs, self.settings.reduced, self.settings.creep)
         self._reduced = (model, k, last_frame)
         return model
 

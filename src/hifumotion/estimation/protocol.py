@@ -22,20 +22,29 @@ def default_frames(n_frames: int) -> tuple[list[int], list[int]]:
 
 
 def parse_frames(text: str | None, n_frames: int, what: str) -> list[int] | None:
-    """``"20,30,40"`` or ``"20:101:10"`` (start:stop:step) → frame numbers; None passes through."""
+    """``"20,30,40"`` or ``"20:101:10"`` (start:stop[:step]) → frame numbers; None passes through.
+
+    The frames must lie in 1 … ``n_frames`` − 1; a range is checked by its ends before any
+    list is made (``1:150000000`` is refused at once, not after allocating it).
+    """
     if text is None:
         return None
+    expected = f"expected frame numbers like '20,30,40' or '20:101:10', got {text[:40]!r}"
     try:
         if ":" in text:
             parts = [int(p) for p in text.split(":")]
-            frames = list(range(*parts))
+            if len(parts) not in (2, 3):
+                raise ValueError
+            frames = range(*parts)
         else:
             frames = [int(p) for p in text.split(",") if p.strip()]
     except ValueError:
-        raise InputError(f"expected frame numbers like '20,30,40' or '20:101:10', got {text!r}", what) from None
-    bad = [f for f in frames if not 0 < f < n_frames]
-    if not frames or bad:
-        raise InputError(f"frames must lie in 1 … {n_frames - 1}; got {frames}", what)
+        raise InputError(expected, what) from None
+    if not len(frames):
+        raise InputError(f"{expected}: that is no frame", what)
+    low, high = min(frames[0], frames[-1]), max(frames[0], frames[-1])
+    if low < 1 or high > n_frames - 1:
+        raise InputError(f"frames must lie in 1 … {n_frames - 1}; got {low} … {high}", what)
     return sorted(set(frames))
 
 

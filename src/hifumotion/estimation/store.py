@@ -17,7 +17,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import numpy as np
 from hifumotion.errors import InputError
 from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters
 from hifumotion.io.files import write_text
+from hifumotion.io.structured import read_structured
 from hifumotion.particles.section import Plane
 from hifumotion.estimation.reference import ReferenceShape
 
@@ -104,7 +104,8 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
         "model_settings": asdict(spec.settings),
         "model": {"tissue_particles": int(len(spec.tissue_mm)), "spacing_mm": spec.spacing_mm,
                   "search_tissue_particles": int(len(cal.search_spec.tissue_mm)),
-                  "search_spacing_mm": cal.search_spec.spacing_mm},
+                  "search_spacing_mm": cal.search_spec.spacing_mm,
+                  "search_integrator": cal.search_spec.settings.integrator},
         "fit": {
             "method": cal.search.method if cal.search is not None else "table1",
             "objective": cal.objective,
@@ -153,14 +154,14 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
     if not pj.is_file():
         raise InputError("not a calibration folder (no parameters.json; run hifumotion calibrate)", folder)
     try:
-        meta = json.loads(pj.read_text())
+        meta = read_structured(pj, "json", "parameters.json")
         p = meta["parameters"]
         k = Parameters(force_n=p["external_force_n"]["value"], youngs_modulus_pa=p["youngs_modulus_pa"]["value"],
                        poisson_ratio=p["poisson_ratio"]["value"], beta1=p["beta1_pa_s_pow"]["value"],
                        beta2=p["beta2"]["value"])
         settings = ModelSettings(**meta["model_settings"])
         interval = float(meta["frame_interval_s"])
-    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
+    except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"malformed calibration ({exc})", pj) from None
     scene = load_scene(folder / "model" / "scene.toml")
     tissue, volume = read_particles_csv(folder / "model" / "tissue_particles.csv")

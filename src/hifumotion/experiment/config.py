@@ -23,6 +23,7 @@ from pydantic import Field
 
 from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
+from hifumotion.resources import MAX_FRAMES
 from hifumotion.particles.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
 from hifumotion import paper
 
@@ -41,7 +42,7 @@ class ResolutionConfig(ConfigModel):
 
 
 class ImagingConfig(ConfigModel):
-    frames: int = Field(200, ge=2, description="number of B-mode frames of the imaging plane while the bar pushes")
+    frames: int = Field(200, ge=2, le=MAX_FRAMES, description="number of B-mode frames of the imaging plane while the bar pushes")
     frame_rate_hz: float = Field(20.0, gt=0, description="imaging frame rate in Hz (frame interval = 1/rate s)")
     pixel_mm: float = Field(0.2, gt=0, description="pixel size of every image in mm (square pixels)")
     width_mm: float = Field(44.0, gt=0, description="lateral extent of the images in mm")
@@ -133,7 +134,7 @@ def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
 class TwinConfig(ConfigModel):
     """The synthetic experiment: sample, material, bar, tank, resolution, imaging."""
 
-    seed: int = Field(0, description="seed of every random draw (shape, speckle, clicks)")
+    seed: int = Field(0, ge=0, lt=2 ** 63, description="seed of every random draw (shape, speckle, clicks); a whole number ≥ 0")
     blob: BlobConfig = BlobConfig()
     tissue: TissueMaterial = TissueMaterial(beta1=7e5, rate_floor_per_s=0.02)
     bar: BarConfig = BarConfig(ramp_s=0.5, density_kg_m3=2700.0)

@@ -16,6 +16,7 @@ Geometry, in order of preference:
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -41,53 +42,116 @@ def _open(path: Path) -> pydicom.Dataset:
         raise InputError(f"cannot read DICOM ({brief(exc)})", path) from None
 
 
+class _Malformed(ValueError):
+    """An attribute that is present but not the numbers the standard says it holds."""
+
+    def __init__(self, keyword: str, value: object, expected: str):
+        self.keyword = keyword
+        super().__init__(f"{keyword} is {str(value)[:40]!r}; expected {expected}")
+
+
+def _numbers(ds: pydicom.Dataset, keyword: str, count: int | None = None, positive: bool = False,
+             expected: str = "numbers") -> tuple[float, ...] | None:
+    """``keyword``'s values as finite floats; None when absent or empty. Present but not
+    ``count`` finite (``positive``) numbers — ``PixelSpacing`` "abc" or one value, ``FrameTime``
+    "fast": common in the wild — raises :class:`_Malformed` (pydicom reads such values lazily,
+    so the access itself may fail)."""
+    try:
+        with warnings.catch_warnings():     # pydicom warns of a value it cannot validate: ours is the one line
+            warnings.simplefilter("ignore")
+            value = ds.get(keyword)
+            if value is None or value == "":
+                return None
+            items = list(value) if isinstance(value, (list, tuple, pydicom.multival.MultiValue)) else [value]
+            numbers = tuple(float(v) for v in items)
+    except (TypeError, ValueError, OverflowError):
+        raise _Malformed(keyword, _raw(ds, keyword), expected) from None
+    if ((count is not None and len(numbers) != count) or not np.all(np.isfinite(numbers))
+            or (positive and not all(x > 0 for x in numbers))):
+        raise _Malformed(keyword, _raw(ds, keyword), expected)
+    return numbers
+
+
+def _raw(ds: pydicom.Dataset, keyword: str) -> str:
+    """The attribute's stored text (for a message), whatever it holds."""
+    try:
+        element = ds.data_element(keyword)
+        value = element.value if element is not None else None
+    except Exception:
+        return "?"
+    return value.decode("latin-1", "replace").strip() if isinstance(value, bytes) else str(value)
+
+
 def ultrasound_region_spacing_mm(ds: pydicom.Dataset) -> tuple[float, float] | None:
-    """``(row, col)`` mm from the largest calibrated region of ``SequenceOfUltrasoundRegions``, if any."""
+    """``(row, col)`` mm from the largest calibrated region of ``SequenceOfUltrasoundRegions``, if any
+    (a region whose deltas are not numbers is skipped, as one without calibration)."""
     best, best_area = None, -1
     for region in ds.get("SequenceOfUltrasoundRegions", []) or []:
         if region.get("PhysicalUnitsXDirection") != UNIT_CM or region.get("PhysicalUnitsYDirection") != UNIT_CM:
             continue
-        dx, dy = region.get("PhysicalDeltaX"), region.get("PhysicalDeltaY")
-        if dx is None or dy is None or float(dx) == 0 or float(dy) == 0:
+        try:
+            dx, dy = _numbers(region, "PhysicalDeltaX", 1), _numbers(region, "PhysicalDeltaY", 1)
+            box = [_numbers(region, k, 1) or (0.0,) for k in
+                   ("RegionLocationMinX0", "RegionLocationMaxX1", "RegionLocationMinY0", "RegionLocationMaxY1")]
+        except _Malformed:
             continue
-        x0, x1 = region.get("RegionLocationMinX0", 0), region.get("RegionLocationMaxX1", 0)
-        y0, y1 = region.get("RegionLocationMinY0", 0), region.get("RegionLocationMaxY1", 0)
+        if dx is None or dy is None or dx[0] == 0 or dy[0] == 0:
+            continue
+        (x0,), (x1,), (y0,), (y1,) = box
         area = abs((x1 - x0) * (y1 - y0))
         if area > best_area:
-            best, best_area = (abs(float(dy)) * 10.0, abs(float(dx)) * 10.0), area
+            best, best_area = (abs(dy[0]) * 10.0, abs(dx[0]) * 10.0), area
     return best
 
 
 def dicom_spacing_mm(ds: pydicom.Dataset) -> tuple[tuple[float, float] | None, str]:
-    """Pixel spacing ``(row, col)`` in mm and the attribute it came from (or ``(None, "")``)."""
+    """Pixel spacing ``(row, col)`` in mm and the attribute it came from (or ``(None, why)``).
+
+    A malformed attribute is passed over, as if absent, and named in the second value: the
+    file gives no pixel size then, and a command that needs one asks for ``--spacing``.
+    """
     us = ultrasound_region_spacing_mm(ds)
     if us is not None:
         return us, "SequenceOfUltrasoundRegions"
-    if "PixelSpacing" in ds and ds.PixelSpacing:
-        return (float(ds.PixelSpacing[0]), float(ds.PixelSpacing[1])), "PixelSpacing"
+    sources = [(ds, "PixelSpacing", "PixelSpacing")]
     for group in ("SharedFunctionalGroupsSequence", "PerFrameFunctionalGroupsSequence"):
         seq = ds.get(group)
-        if seq and "PixelMeasuresSequence" in seq[0]:
-            ps = seq[0].PixelMeasuresSequence[0].get("PixelSpacing")
-            if ps:
-                return (float(ps[0]), float(ps[1])), f"{group}.PixelMeasuresSequence"
-    if "ImagerPixelSpacing" in ds and ds.ImagerPixelSpacing:
-        return (float(ds.ImagerPixelSpacing[0]), float(ds.ImagerPixelSpacing[1])), "ImagerPixelSpacing"
-    return None, ""
+        if seq and "PixelMeasuresSequence" in seq[0] and seq[0].PixelMeasuresSequence:
+            sources.append((seq[0].PixelMeasuresSequence[0], "PixelSpacing", f"{group}.PixelMeasuresSequence"))
+    sources.append((ds, "ImagerPixelSpacing", "ImagerPixelSpacing"))
+    malformed = []
+    for holder, keyword, name in sources:
+        try:
+            values = _numbers(holder, keyword, 2, positive=True, expected="two positive numbers (mm)")
+        except _Malformed as exc:
+            malformed.append(str(exc))
+            continue
+        if values is not None:
+            return (values[0], values[1]), name
+    return None, ("malformed: " + "; ".join(malformed)) if malformed else ""
 
 
 def dicom_frame_interval_s(ds: pydicom.Dataset) -> tuple[float | None, str]:
-    """Frame interval in seconds and the attribute it came from (or ``(None, "")``)."""
-    if ds.get("FrameTime") not in (None, "") and float(ds.FrameTime) > 0:
-        return float(ds.FrameTime) / 1000.0, "FrameTime"
-    ftv = ds.get("FrameTimeVector")
-    if ftv is not None and len(ftv) > 1:
-        steps = np.asarray([float(v) for v in ftv][1:])
-        if np.all(steps > 0):
-            return float(steps.mean()) / 1000.0, "FrameTimeVector"
-    if ds.get("CineRate") not in (None, "") and float(ds.CineRate) > 0:
-        return 1.0 / float(ds.CineRate), "CineRate"
-    return None, ""
+    """Frame interval in seconds and the attribute it came from (or ``(None, why)``; a malformed
+    attribute is passed over and named, as in :func:`dicom_spacing_mm`)."""
+    malformed = []
+    for keyword, to_seconds in (("FrameTime", lambda v: v[0] / 1000.0),
+                                ("FrameTimeVector", lambda v: float(np.mean(np.asarray(v[1:]))) / 1000.0),
+                                ("CineRate", lambda v: 1.0 / v[0])):
+        try:
+            values = _numbers(ds, keyword, 1 if keyword != "FrameTimeVector" else None,
+                              expected="a number" if keyword != "FrameTimeVector" else "numbers (ms)")
+        except _Malformed as exc:
+            malformed.append(str(exc))
+            continue
+        if values is None:
+            continue
+        if keyword == "FrameTimeVector":
+            if len(values) > 1 and all(v > 0 for v in values[1:]):
+                return to_seconds(values), keyword
+        elif values[0] > 0:
+            return to_seconds(values), keyword
+    return None, ("malformed: " + "; ".join(malformed)) if malformed else ""
 
 
 def _value_range(ds: pydicom.Dataset, pixels: np.ndarray) -> tuple[float, float] | None:
@@ -135,12 +199,21 @@ def read_dicom_file(path: Path) -> dict[str, Any]:
             "frame_interval_s": interval, "slice_positions_mm": None, "metadata": meta}
 
 
-def _slice_position_mm(ds: pydicom.Dataset) -> float | None:
-    ipp, iop = ds.get("ImagePositionPatient"), ds.get("ImageOrientationPatient")
+def _slice_position_mm(ds: pydicom.Dataset, path: Path) -> float | None:
+    """The image's position along its plane's normal (mm), None without the attributes; malformed
+    ones (a three-value ``ImageOrientationPatient``) are an :class:`InputError`: a sweep's order
+    and spacing would be guessed."""
+    try:
+        ipp = _numbers(ds, "ImagePositionPatient", 3, expected="three numbers (mm)")
+        iop = _numbers(ds, "ImageOrientationPatient", 6, expected="six numbers (two direction cosines)")
+    except _Malformed as exc:
+        raise InputError(str(exc), path) from None
     if ipp is None or iop is None:
         return None
-    normal = np.cross(np.asarray(iop[:3], float), np.asarray(iop[3:], float))
-    return float(np.dot(np.asarray(ipp, float), normal))
+    normal = np.cross(np.asarray(iop[:3]), np.asarray(iop[3:]))
+    if not np.linalg.norm(normal) > 0.5:
+        raise InputError(f"ImageOrientationPatient {list(iop)} is not two perpendicular unit directions", path)
+    return float(np.dot(np.asarray(ipp), normal))
 
 
 def read_dicom_folder(folder: Path) -> dict[str, Any]:
@@ -157,7 +230,7 @@ def read_dicom_folder(folder: Path) -> dict[str, Any]:
     shapes = {s.shape for s in stacks}
     if len(shapes) != 1:
         raise InputError(f"DICOM images in the folder differ in size: {sorted(shapes)}", folder)
-    positions = [_slice_position_mm(ds) for ds in datasets]
+    positions = [_slice_position_mm(ds, f) for ds, f in zip(datasets, files)]
     first = datasets[0]
     spacing, spacing_from = dicom_spacing_mm(first)
     meta = _metadata(first) | {"format": "DICOM series", "files": len(files), "spacing_from": spacing_from}
@@ -167,7 +240,13 @@ def read_dicom_folder(folder: Path) -> dict[str, Any]:
             raise InputError("two DICOM images of the sweep share one slice position", folder)
         interval, positions_mm = None, np.asarray(positions)[order]
     else:
-        numbers = [int(ds.get("InstanceNumber", i)) for i, ds in enumerate(datasets)]
+        numbers = []
+        for i, (ds, f) in enumerate(zip(datasets, files)):
+            try:
+                number = _numbers(ds, "InstanceNumber", 1, expected="a whole number")
+            except _Malformed as exc:
+                raise InputError(str(exc), f) from None
+            numbers.append(i if number is None else number[0])
         order = np.argsort(numbers, kind="stable")
         interval, interval_from = dicom_frame_interval_s(first)
         meta["frame_interval_from"] = interval_from

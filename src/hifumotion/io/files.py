@@ -143,7 +143,7 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
     folder = Path(path)
     # what is checked is what will be written: the resolved path (``missing/../file`` does not
     # exist as typed, but resolves onto ``file``)
-    final = folder.resolve()
+    final = _resolved(folder)
     if final.exists() or folder.is_symlink():
         if not final.is_dir():
             raise InputError("exists and is not a folder; choose another output folder", folder)
@@ -164,6 +164,14 @@ def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) ->
                                  "hifumotion's own output folders — choose a new one", folder)
             _refuse_foreign(foreign_contents(final), folder)
     return folder
+
+
+def _resolved(path: Path) -> Path:
+    """``path`` resolved; a symbolic link that points back into itself is an :class:`InputError`."""
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError):     # Python < 3.13 raises RuntimeError on a loop, later OSError
+        raise InputError("is a symbolic link loop; expected a folder or a new path", path) from None
 
 
 def _refuse_foreign(foreign: list[str] | None, shown: Path) -> None:
@@ -188,6 +196,37 @@ def _make_parent(final: Path, shown: Path) -> None:
         raise InputError(f"cannot write into {final.parent} (permission denied)", shown)
 
 
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True                  # another user's process, or no such number: not ours to judge
+    return True
+
+
+def remove_stale_staging(final: Path) -> list[Path]:
+    """Remove the staging folders of runs into ``final`` that were killed before they could
+    clean up (``.NAME.PID.*.partial`` whose process is gone); the removed folders are returned.
+    Only folders of that form, which hifumotion made, are touched; a staging folder without a
+    process number (an older version's) or of a live process stays."""
+    removed = []
+    try:
+        candidates = list(final.parent.glob(f".{final.name}.*.partial"))
+    except OSError:
+        return removed
+    for folder in candidates:
+        middle = folder.name[len(final.name) + 2: -len(".partial")]
+        pid_text = middle.split(".", 1)[0]
+        if not pid_text.isdigit() or "." not in middle or not folder.is_dir() or folder.is_symlink():
+            continue
+        if not _process_alive(int(pid_text)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
+
+
 @contextlib.contextmanager
 def output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Iterator[Path]:
     """Prepare a run's output folder; yield a staging folder to write into.
@@ -203,8 +242,11 @@ def output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Itera
     shown = Path(path)
     final = check_output_folder(path, overwrite, inputs).resolve()
     _make_parent(final, shown)
+    remove_stale_staging(final)
     try:
-        staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+        # the staging folder's name carries its process: a later run can tell one whose run was
+        # killed (SIGKILL, power loss) from one still being written
+        staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.{os.getpid()}.", suffix=".partial", dir=final.parent))
     except OSError as exc:
         raise InputError(f"cannot create the output folder here ({exc.strerror or exc})", shown) from None
     follow_umask(staging, folder=True)

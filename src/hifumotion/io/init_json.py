@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -12,13 +11,10 @@ from hifumotion.errors import InputError
 
 def read_init_json(path: str | Path) -> dict[str, dict[str, Any]]:
     """The raw mapping ``image name → {"ellipse": {...}, "points": [...]}`` of an ``init.json``."""
-    from hifumotion.io.files import require_regular_file
+    from hifumotion.io.structured import read_structured
 
-    p = require_regular_file(path, "init.json")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid JSON ({exc})", p) from None
+    p = Path(path)
+    data = read_structured(p, "json", "init.json")
     if not isinstance(data, dict):
         raise InputError("expected an object mapping image names to initial contours", p)
     return data

@@ -111,6 +111,86 @@ def check_nifti(path: Path) -> None:
             raise InputError(f"truncated: the header promises {expected} bytes, the file holds {found}", path)
 
 
+#: Bytes per element of MetaImage's and NRRD's element types.
+_META_BYTES = {"MET_UCHAR": 1, "MET_CHAR": 1, "MET_USHORT": 2, "MET_SHORT": 2, "MET_UINT": 4, "MET_INT": 4,
+               "MET_ULONG": 8, "MET_LONG": 8, "MET_ULONG_LONG": 8, "MET_LONG_LONG": 8, "MET_FLOAT": 4,
+               "MET_DOUBLE": 8}
+_NRRD_BYTES = {**{t: 1 for t in ("uchar", "signed char", "unsigned char", "uint8", "int8", "uint8_t", "int8_t")},
+               **{t: 2 for t in ("short", "ushort", "unsigned short", "int16", "uint16", "int16_t", "uint16_t",
+                                 "short int", "signed short", "unsigned short int")},
+               **{t: 4 for t in ("int", "uint", "unsigned int", "int32", "uint32", "int32_t", "uint32_t", "float",
+                                 "signed int")},
+               **{t: 8 for t in ("double", "longlong", "ulonglong", "int64", "uint64", "int64_t", "uint64_t",
+                                 "long long", "unsigned long long")}}
+
+
+def _header_fields(path: Path, separator: str) -> dict[str, str]:
+    """The ``key <separator> value`` lines of a text header (its first 64 kB), keys lower-case."""
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read(1 << 16).decode("latin-1")
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror})", path) from None
+    fields = {}
+    for line in text.splitlines():
+        if separator in line and not line.startswith("#"):
+            key, value = line.split(separator, 1)
+            fields.setdefault(key.strip().lower(), value.strip())
+    return fields
+
+
+def check_detached_data(path: Path) -> None:
+    """Refuse a MetaImage (``.mhd``) or NRRD (``.nhdr``) header whose data file is not a
+    regular file (``/dev/urandom``, a FIFO: endless or blocking reads) or does not hold the
+    bytes the header describes (another file of the system read as pixels). Compressed data
+    is checked by kind only: its size is not known before it is decompressed."""
+    from hifumotion.io.files import require_regular_file
+
+    name = path.name.lower()
+    if name.endswith(".mhd"):
+        fields = _header_fields(path, "=")
+        data = fields.get("elementdatafile")
+        if data is None or data.upper() == "LOCAL" or data.upper().startswith("LIST") or "%" in data:
+            return      # data inline, or a list of slice files (each read by ITK as named)
+        try:
+            dims = [int(x) for x in fields.get("dimsize", "").split()]
+            element = _META_BYTES[fields.get("elementtype", "").upper()]
+            channels = int(fields.get("elementnumberofchannels", "1"))
+            skip = int(fields.get("headersize", "0"))
+        except (KeyError, ValueError):
+            raise InputError("MetaImage header: expected DimSize, a known ElementType and whole numbers", path) from None
+        compressed = fields.get("compresseddata", "false").lower() == "true"
+    elif name.endswith(".nhdr"):
+        fields = _header_fields(path, ":")
+        data = fields.get("data file", fields.get("datafile"))
+        if data is None or data.upper().startswith("LIST") or len(data.split()) > 1:
+            return
+        try:
+            dims = [int(x) for x in fields.get("sizes", "").split()]
+            element = _NRRD_BYTES[" ".join(fields.get("type", "").lower().split())]
+            channels = 1
+            skip = int(fields.get("byte skip", fields.get("byteskip", "0")))
+            if int(fields.get("line skip", fields.get("lineskip", "0"))) != 0:
+                skip = -1
+        except (KeyError, ValueError):
+            raise InputError("NRRD header: expected sizes, a known type and whole numbers", path) from None
+        compressed = fields.get("encoding", "raw").lower() not in ("raw",)
+    else:
+        return
+    target = Path(data)
+    if not target.is_absolute():
+        target = path.parent / target
+    require_regular_file(target, f"data file named by {path.name}")
+    if compressed or not dims or min(dims) < 1:
+        return
+    expected = int(np.prod(dims, dtype=np.int64)) * element * max(channels, 1)
+    size = target.stat().st_size
+    ok = size >= expected if skip < 0 else size == expected + skip
+    if not ok:
+        raise InputError(f"its data file {target} holds {size} bytes; the header describes {expected + max(skip, 0)}"
+                         " (not this image's pixels?)", path)
+
+
 def read_itk_file(path: Path, kind: str = "auto") -> dict[str, Any]:
     """Read a NIfTI/MHA/MHD/NRRD file into the fields of an :class:`ImageSequence`.
 
@@ -118,6 +198,7 @@ def read_itk_file(path: Path, kind: str = "auto") -> dict[str, Any]:
     """
     if path.name.lower().endswith((".nii", ".nii.gz")):
         check_nifti(path)
+    check_detached_data(path)
     try:
         image = sitk.ReadImage(str(path))
     except Exception as exc:

@@ -12,7 +12,6 @@ of pixel (row 0, column 0) and a plane's z its position along the pool's z.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Literal
 
@@ -168,13 +167,10 @@ def write_setup(path: str | Path, setup: Setup) -> Path:
 def read_setup(path: str | Path) -> Setup:
     """``setup.json`` as a :class:`Setup`; a missing, malformed or invalid file is one
     :class:`~hifumotion.errors.InputError` naming the file and the field."""
-    from hifumotion.io.files import require_regular_file
+    from hifumotion.io.structured import read_structured
 
-    p = require_regular_file(path, "setup.json")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"not valid JSON ({exc})", p) from None
+    p = Path(path)
+    data = read_structured(p, "json", "setup.json")
     if not isinstance(data, dict):
         raise InputError("expected a JSON object", p)
     if isinstance(data.get("bar"), dict) and "force_ramp_s" in data["bar"] and "push" not in data:

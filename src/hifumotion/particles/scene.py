@@ -34,7 +34,7 @@ from pydantic import Field, field_validator, model_validator
 
 from hifumotion.config import ConfigModel
 from hifumotion.errors import InputError
-from hifumotion.resources import check_memory
+from hifumotion.resources import MAX_FRAMES, check_memory
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.rigid import piecewise_linear_schedule
 from hifumotion.particles.solver import SolverSettings
@@ -153,6 +153,17 @@ class RunConfig(ConfigModel):
     max_step_s: float = Field(1e-3, gt=0, description="largest time step in s")
     write_vtu: bool = Field(True, description="write VTU files of the particles (with a PVD index)")
     vtu_every: int = Field(1, ge=1, description="write every n-th output frame as VTU")
+
+    @model_validator(mode="after")
+    def _bounded_work(self):
+        frames = self.duration_s / self.output_interval_s
+        if frames > MAX_FRAMES:
+            raise ValueError(f"duration_s / output_interval_s = {frames:.3g} frames; a run records at most "
+                             f"{MAX_FRAMES:,} (a longer interval or a shorter run)")
+        if self.duration_s / self.max_step_s > 1e9:
+            raise ValueError(f"duration_s / max_step_s = {self.duration_s / self.max_step_s:.3g} steps at the least; "
+                             "expected at most 10⁹")
+        return self
 
 
 class Scene(ConfigModel):

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Callable, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from hifumotion.config import ConfigModel
 from hifumotion.observed import Observed
@@ -51,6 +51,8 @@ class EstimationConfig(ConfigModel):
     force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
     particles: int = Field(paper.TISSUE_PARTICLES, ge=100, le=1_000_000, description="tissue particles of the fitted model (the paper: 4,399)")
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
+    search_integrator: Literal["implicit", "reduced"] | None = Field(
+        None, description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre and again around the first optimum); default: the calibration's (estimation.calibrate.CalibrationSettings)")
     max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
     objective: Literal["auto", "contour", "contour+displacement"] = Field(
         "auto", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points; auto: the displacement too where speckle tracking observed it")
@@ -65,6 +67,16 @@ class EstimationConfig(ConfigModel):
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
     workers: int | None = Field(None, ge=1, description="Dask worker processes of the local cluster (default: the cores)")
     scheduler_address: str | None = Field(None, description="an existing Dask cluster, tcp://host:8786")
+
+    @field_validator("scheduler_address")
+    @classmethod
+    def _an_address(cls, v):
+        from hifumotion.estimation.evaluator import scheduler_address_problem
+
+        problem = None if v is None else scheduler_address_problem(v)
+        if problem:
+            raise ValueError(problem)
+        return v
 
 
 @dataclass
@@ -121,7 +133,9 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
             method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
             model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations, objective=s.objective,
             quality_weights=s.quality_weights, bar_motion=s.bar_motion,
-            workers=s.workers, scheduler_address=s.scheduler_address), log_path=log, progress=tell)
+            workers=s.workers, scheduler_address=s.scheduler_address,
+            **({} if s.search_integrator is None else {"search_integrator": s.search_integrator})),
+            log_path=log, progress=tell)
     with stage("write the calibration"):
         cal.summary = save_calibration(cal, folder, observed_dir)
     return observation, cal
