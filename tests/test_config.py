@@ -60,3 +60,49 @@ def test_dump_toml_reads_back_with_descriptions():
     text = dump_toml(model)
     assert "# pixel size in mm" in text
     assert ReadOptions.model_validate(tomllib.loads(text)) == model
+
+
+def test_a_setting_is_changed_by_its_dotted_path_and_validated_as_any_configuration():
+    from hifumotion.config import apply_settings, validate_config
+    from hifumotion.workflow.pipeline import EstimationConfig
+
+    data = apply_settings({"model": {"tissue_particles": 2000}},
+                          ["model.creep.tolerance=0.01", "model.reduced.friction=false", "search_integrator=reduced",
+                           "horizons_frames=[2, 4]"])
+    s = validate_config(EstimationConfig, data)
+    assert s.model.tissue_particles == 2000 and s.model.creep.tolerance == 0.01 and s.model.reduced.friction is False
+    assert s.search_integrator == "reduced" and s.horizons_frames == [2, 4]
+    assert type(s.model.creep).__name__ == "CreepSettings"          # the solver's own type, not a copy
+    for items, word in ((["model.creep.tolerence=0.01"], "tolerence"), (["model.creep.tolerance=-1"], "greater than 0"),
+                        (["model.creep.precision=quad"], "precision"), (["model.integrator=magic"], "integrator"),
+                        (["model.tissue_particles=2.5"], "tissue_particles")):
+        with pytest.raises(InputError, match=word):
+            validate_config(EstimationConfig, apply_settings({}, items))
+    for bad in ("noequals", "=3", "a..b=1"):
+        with pytest.raises(InputError, match="KEY=VALUE"):
+            apply_settings({}, [bad])
+    with pytest.raises(InputError, match="not a table"):
+        apply_settings({"model": {"integrator": "implicit"}}, ["model.integrator.x=1"])
+
+
+def test_particles_is_the_models_tissue_particles_given_once():
+    from hifumotion.config import validate_config
+    from hifumotion.workflow.pipeline import EstimationConfig
+
+    assert EstimationConfig(particles=600).model.tissue_particles == 600
+    assert EstimationConfig().model.tissue_particles == 4399
+    with pytest.raises(InputError, match="give it once"):
+        validate_config(EstimationConfig, {"particles": 600, "model": {"tissue_particles": 700}})
+
+
+def test_reading_a_setting_does_not_load_the_solvers():
+    """A configuration is validated (and ``--help`` answers) without Numba, SciPy's solvers or
+    the image readers: each package imports them on first use."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import hifumotion.workflow.pipeline, hifumotion.cli; "
+            "heavy = [m for m in ('numba', 'scipy.sparse', 'SimpleITK', 'pydicom', 'hifumotion.creep.integrate') "
+            "if m in sys.modules]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr

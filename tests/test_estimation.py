@@ -434,19 +434,28 @@ def test_contour_residuals_are_weighted_by_the_tracking_quality_at_each_point():
 @pytest.mark.slow
 def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path):
     """``hifumotion predict CAL/`` must predict with the calibrated model itself: the same
-    conforming voxel mesh, so the same motion as the calibration held in memory."""
+    conforming voxel mesh, so the same motion as the calibration held in memory. The search
+    runs on the search model's reduced model (its snapshots on the cluster), and a setting of
+    the fast path given in the run's configuration reaches the model that was fitted and saved."""
     from hifumotion.estimation.store import load_calibration
     from hifumotion.metrics import dice
     from hifumotion.observed import load_observed
     from hifumotion.prediction.pipeline import predict_calibrated
+    from hifumotion.config import validate_config
     from hifumotion.workflow.pipeline import EstimationConfig, observe_and_calibrate
 
     folder, _ = small_twin
     observed = load_observed(folder / "observed")
     train, valid = default_frames(len(observed.frames))
-    settings = EstimationConfig(particles=300, search_particles=150, max_evaluations=1, workers=1)
+    settings = validate_config(EstimationConfig, {
+        "search_particles": 150, "max_evaluations": 1, "workers": 1, "search_integrator": "reduced",
+        "model": {"tissue_particles": 300, "creep": {"stick_mm": 0.02}}})
     observation, cal = observe_and_calibrate(observed, tmp_path / "cal", settings, train)
     spec, k, reference, _ = load_calibration(tmp_path / "cal")
+    assert cal.spec.settings.creep.stick_mm == spec.settings.creep.stick_mm == 0.02
+    assert cal.search_spec.settings.integrator == "reduced" and cal.search_spec.settings.creep.stick_mm == 0.02
+    # the reduced search model was made twice: around the design's centre, then the first optimum
+    assert len(cal.mapped["reduced_model_centres"]) == 2 and cal.timings_s["reduced_model_s"] > 0
     assert k.as_dict() == pytest.approx(cal.parameters.as_dict(), rel=1e-9)
     # the same mesh: the loaded model's voxels conform to the reconstructed surface as the fitted one's
     assert spec.voxels().nodes_mm.shape == cal.spec.voxels().nodes_mm.shape

@@ -18,8 +18,20 @@ except PackageNotFoundError:  # running from a source tree that was not installe
     __version__ = "0.0.0+unknown"
 
 from hifumotion.errors import HifuError, InputError  # noqa: E402
-from hifumotion.sequence import ImageSequence  # noqa: E402
-from hifumotion.contour import Contour, Ellipse, ClickedPoints  # noqa: E402
+
+# the image and contour types are imported on first use: they pull SciPy and Numba, which a
+# command's ``--help`` or a configuration's validation should not wait for
+_LAZY = {"ImageSequence": "hifumotion.sequence", "Contour": "hifumotion.contour", "Ellipse": "hifumotion.contour",
+         "ClickedPoints": "hifumotion.contour"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'hifumotion' has no attribute {name!r}")
+
 
 __all__ = [
     "__version__",

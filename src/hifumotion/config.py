@@ -8,12 +8,14 @@ the field.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from hifumotion.errors import InputError
+from hifumotion.io.structured import parse_text
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -77,6 +79,36 @@ def validate_config(model: type[M], data: dict[str, Any], source: str | Path = "
         raise InputError(f"field '{where}': {err['msg']}{more}", source) from None
 
 
+def apply_settings(data: dict[str, Any], items: list[str] | None, option: str = "--set") -> dict[str, Any]:
+    """``data`` with each ``KEY=VALUE`` of ``items`` set: ``KEY`` a dotted path into the nested
+    tables (``model.creep.tolerance``), ``VALUE`` read as a TOML value (``0.01``, ``true``,
+    ``[1, 2]``, ``"text"``; a bare word is text). The result is validated by the caller's
+    model like any configuration, so a mistyped key or value is named there."""
+    out = _copy_tables(data)
+    for item in items or []:
+        key, sep, text = item.partition("=")
+        path = [part.strip() for part in key.split(".")]
+        if not sep or not all(path):
+            raise InputError(f"expected KEY=VALUE such as model.creep.tolerance=0.01, got {item[:60]!r}", option)
+        try:
+            value = parse_text(f"v = {text.strip()}", "toml", option)["v"]
+        except InputError:
+            value = text.strip()                # a bare word: text, as in model.integrator=reduced
+        table = out
+        for i, part in enumerate(path[:-1]):
+            nxt = table.setdefault(part, {})
+            if not isinstance(nxt, dict):
+                raise InputError(f"{'.'.join(path[:i + 1])} is a value, not a table of settings ({item[:60]!r})",
+                                 option)
+            table = nxt
+        table[path[-1]] = value
+    return out
+
+
+def _copy_tables(data: dict) -> dict:
+    return {k: _copy_tables(v) if isinstance(v, dict) else v for k, v in data.items()}
+
+
 def load_config(path: str | Path, model: type[M]) -> M:
     """Read a TOML/YAML file into ``model``; relative paths in it stay relative to the caller."""
     return validate_config(model, read_config_file(path), path)
@@ -99,15 +131,27 @@ def _toml_value(v: Any) -> str:
     return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-def _dump_table(model: BaseModel, prefix: list[str], lines: list[str]) -> None:
+def _fields(model) -> list[tuple[str, str | None]]:
+    """``(name, description)`` of a pydantic model's or a dataclass's fields (a dataclass's
+    settings are documented in its docstring, not per field)."""
+    if isinstance(model, BaseModel):
+        return [(name, info.description) for name, info in type(model).model_fields.items()]
+    return [(f.name, None) for f in dataclasses.fields(model)]
+
+
+def _is_table(value) -> bool:
+    return isinstance(value, BaseModel) or (dataclasses.is_dataclass(value) and not isinstance(value, type))
+
+
+def _dump_table(model, prefix: list[str], lines: list[str]) -> None:
     nested = []
-    for name, info in type(model).model_fields.items():
+    for name, description in _fields(model):
         value = getattr(model, name)
-        if isinstance(value, BaseModel):
+        if _is_table(value):
             nested.append((name, value))
             continue
-        if info.description:
-            lines.append(f"# {info.description}")
+        if description:
+            lines.append(f"# {description}")
         if value is None:
             lines.append(f"# {name} = (not set)")
         else:
@@ -115,4 +159,8 @@ def _dump_table(model: BaseModel, prefix: list[str], lines: list[str]) -> None:
     for name, value in nested:
         lines.append("")
         lines.append(f"[{'.'.join(prefix + [name])}]")
+        if not isinstance(value, BaseModel) and type(value).__doc__:
+            # a dataclass's settings: its docstring's first line, and where each is described
+            lines.append(f"# {type(value).__doc__.strip().splitlines()[0]} "
+                         f"(each setting: {type(value).__module__}.{type(value).__name__})")
         _dump_table(value, prefix + [name], lines)

@@ -23,17 +23,18 @@ def calibrate(
     objective: str = typer.Option("auto", "--objective", help="auto (default: contour+displacement where speckle tracking observed the motion, else contour), contour (the paper's S_t) or contour+displacement (also the speckle-tracked displacement of the contour points)."),
     tracking: str = typer.Option("speckle", "--tracking", help="speckle (frame 0's contour carried by speckle tracking, default) or glcv (re-segment every frame, as the paper)."),
     force: float = typer.Option(paper.FORCE_N, "--force", callback=positive, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
-    particles: int = typer.Option(paper.TISSUE_PARTICLES, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (the paper: 4,399)."),
+    particles: Optional[int] = typer.Option(None, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (default 4,399, the paper's; short for --set model.tissue_particles=N)."),
     search_particles: int = typer.Option(1000, "--search-particles", min=100, max=1_000_000, help="Tissue particles of the coarser model the search runs on."),
     max_evaluations: int = typer.Option(8, "--max-evaluations", min=1, help="Least squares: residual evaluations (each with a p-run Jacobian)."),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Dask worker processes of the local cluster (default: the cores)."),
     scheduler_address: Optional[str] = typer.Option(None, "--scheduler-address", help="Use an existing Dask cluster (tcp://host:8786)."),
     boundary_offset: float = typer.Option(0.0, "--boundary-offset", min=-5.0, max=5.0, help="How far outside the true boundary your system's segmentations lie (mm, from a phantom of known size); masks move inwards by it."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A search_log.jsonl of an interrupted calibration: its runs are not repeated."),
+    settings_set: Optional[list[str]] = typer.Option(None, "--set", help="Change one setting: KEY=VALUE, KEY a dotted path (model.creep.tolerance=0.01, search_integrator=reduced; the fields of hifumotion run's [estimation]); repeatable."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Estimate force/Young's modulus, Poisson's ratio, β1, β2 from the training frames (Table 1 and better)."""
-    from hifumotion.config import validate_config
+    from hifumotion.config import apply_settings, validate_config
     from hifumotion.console import StageBars
     from hifumotion.estimation.calibrate import OBJECTIVES
     from hifumotion.estimation.evaluator import check_search_log, scheduler_address_problem
@@ -53,12 +54,13 @@ def calibrate(
         raise InputError(problem, "--scheduler-address")
     if resume is not None:
         check_search_log(resume)
+    options = {"method": method, "force_n": force, "search_particles": search_particles,
+               "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset, "tracking": tracking,
+               "objective": objective, "workers": workers, "scheduler_address": scheduler_address,
+               **({} if particles is None else {"particles": particles})}
+    settings = validate_config(EstimationConfig, apply_settings(options, settings_set), "options")
     observed = load_observed(observed_dir)
     frames = parse_frames(training, len(observed.frames), "--training") or default_frames(len(observed.frames))[0]
-    settings = validate_config(EstimationConfig, {
-        "method": method, "force_n": force, "particles": particles, "search_particles": search_particles,
-        "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset, "tracking": tracking, "objective": objective, "workers": workers,
-        "scheduler_address": scheduler_address}, "options")
     record = RunRecord("calibrate", config={"observed": str(observed_dir), "training": frames,
                                             "contours": None if contours is None else str(contours),
                                             **settings.model_dump(mode="json")})

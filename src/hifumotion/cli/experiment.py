@@ -21,6 +21,7 @@ def experiment(
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of every random draw (overrides the config's)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
     print_config: bool = typer.Option(False, "--print-config", help="Print every setting (with its unit) as TOML and exit."),
+    settings: Optional[list[str]] = typer.Option(None, "--set", help="Change one setting: KEY=VALUE, KEY a dotted path (imaging.frames=100, protocol.name=oblique); repeatable."),
 ) -> None:
     """Generate the digital twin of the paper's experiment: a sweep, 200 frames, a clicked contour, and the truth."""
     from hifumotion.config import dump_toml
@@ -29,7 +30,9 @@ def experiment(
     from hifumotion.io import output_folder
     from hifumotion.run_info import RunRecord
 
-    cfg = twin_config(preset, config_file=config, seed=seed)
+    from hifumotion.config import apply_settings
+
+    cfg = twin_config(preset, overrides=apply_settings({}, settings), config_file=config, seed=seed)
     if print_config:
         typer.echo(dump_toml(cfg))
         return

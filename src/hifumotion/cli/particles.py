@@ -19,6 +19,7 @@ def simulate(
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New output folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
     print_scene: bool = typer.Option(False, "--print-scene", help="Print the scene (every field, with its unit) as TOML and exit."),
+    settings: Optional[list[str]] = typer.Option(None, "--set", help="Change one setting: KEY=VALUE, KEY a dotted path (bar.force_n=0.3, run.duration_s=2); repeatable."),
     integrator: str = typer.Option("explicit", "--integrator", help="explicit: the paper's particle framework (SPH water, Eq. 8–20); implicit: the fast path (the tissue's creep, contacts as constraints, water as buoyancy)."),
 ) -> None:
     """Simulate tissue, water and bar: frames/*.vtu + frames.pvd (ParaView), bar_pose.csv, run_info.json.
@@ -28,11 +29,11 @@ def simulate(
     from hifumotion.config import dump_toml
     from hifumotion.console import progress_fraction
     from hifumotion.io import output_folder, write_json
-    from hifumotion.particles.scene import Scene, load_scene
+    from hifumotion.particles.scene import load_scene
     from hifumotion.particles.simulate import simulate as run
     from hifumotion.run_info import RunRecord
 
-    scene = load_scene(scene_file) if scene_file is not None else Scene()
+    scene = load_scene(scene_file, settings)
     if print_scene:
         typer.echo(dump_toml(scene))
         return

@@ -67,6 +67,7 @@ def run(
     config: Optional[Path] = typer.Argument(None, help="A run configuration (TOML or YAML); see --example."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New output folder (default: the config's output)."),
     example: bool = typer.Option(False, "--example", help="Print a complete example configuration and exit."),
+    settings: Optional[list[str]] = typer.Option(None, "--set", help="Change one setting: KEY=VALUE, KEY a dotted path (estimation.model.creep.tolerance=0.01, estimation.search_integrator=reduced); repeatable."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Run the whole pipeline on your own files: sweep + time series → calibrate → predict → score → report."""
@@ -80,7 +81,7 @@ def run(
         return
     if config is None:
         raise InputError("give a run configuration file (hifumotion run --example prints one)", "CONFIG")
-    cfg, base = load_run_config(config)
+    cfg, base = load_run_config(config, settings)
     target = output or (None if cfg.output is None else (cfg.output if cfg.output.is_absolute() else base / cfg.output))
     if target is None:
         raise InputError("no output folder: give -o or set output in the configuration", config)

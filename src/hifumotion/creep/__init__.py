@@ -10,9 +10,20 @@ rigid constraints with Coulomb friction (:mod:`.contact`). :func:`~.scene.simula
 runs a :class:`~hifumotion.particles.scene.Scene` with it.
 """
 
-from hifumotion.creep.contact import Plane, Punch
-from hifumotion.creep.integrate import CreepMaterial, CreepResult, CreepSettings, CreepSolver, Surroundings
-from hifumotion.creep.voxels import VoxelMesh, voxel_mesh
+import importlib
 
-__all__ = ["Plane", "Punch", "CreepMaterial", "CreepResult", "CreepSettings", "CreepSolver", "Surroundings",
-           "VoxelMesh", "voxel_mesh"]
+# names → the module that defines them, imported on first use: the solvers pull Numba, SciPy
+# and PARDISO, which a command that only reads the settings (``--help``, a configuration's
+# validation) should not pay for
+_WHERE = {"Plane": "contact", "Punch": "contact", "CreepMaterial": "integrate", "CreepResult": "integrate",
+          "CreepSolver": "integrate", "Surroundings": "integrate", "CreepSettings": "settings",
+          "ReducedSettings": "settings", "VoxelMesh": "voxels", "voxel_mesh": "voxels"}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        return getattr(importlib.import_module(f"hifumotion.creep.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'hifumotion.creep' has no attribute {name!r}")
+
+
+__all__ = sorted(_WHERE)

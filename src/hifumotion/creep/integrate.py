@@ -44,6 +44,7 @@ from hifumotion.creep.contact import SLIP, STICK, ContactSet, FrictionLinearised
 from hifumotion.creep.hexahedra import MeshMatrices, _positions
 from hifumotion.creep.linear import Factor, FactorError, preconditioned_cg, refined_solve
 from hifumotion.creep.reduce import reduced_matrix_data
+from hifumotion.creep.settings import CreepSettings
 from hifumotion.creep.voxels import VoxelMesh
 from hifumotion.errors import InputError
 
@@ -90,59 +91,6 @@ class Surroundings:
     water_density_kg_m3: float = 1000.0
     water_line_m: float | None = None
     up: int = 1  # the axis along which the water line is measured
-
-
-@dataclass
-class CreepSettings:
-    """Numerical settings of the fast path.
-
-    Attributes
-    ----------
-    tolerance
-        Local error of a step (backward Euler's ½ Δt |Δu̇|), in particle spacings.
-    first_step_s, max_step_s
-        The first step and the largest one (s); the first defaults to the output interval / 4.
-    contact_tolerance
-        A free node closer than this many spacings *behind* a surface is put in contact.
-    max_rounds
-        Rounds of the active-set rules and the friction's linearisation per step.
-    cg_iterations, cg_rtol
-        Conjugate-gradient budget before a fresh factorisation, and the relative residual of
-        a step's solution.
-    round_rtol
-        The relative residual of a round's solution (the rounds only decide the contact set
-        and the friction's linearisation; the last one is solved on to ``cg_rtol``).
-    friction_rtol
-        A step's rounds end when no contact changed and every contact's friction, at its
-        new normal reaction, is the linearised one to this fraction of μ_f λ_n.
-    stick_mm
-        The elastic stick's reach ε (mm): a contact sticks up to this tangential
-        displacement from its anchor and slides beyond it. 10 µm, a hundredth of a
-        spacing (the FE truth's is 1 µm): the same motion to 0.5 µm of its error against
-        the truth, a third fewer solves (docs/decisions.md).
-    newton_rounds
-        Rounds that linearise the friction by its tangent (Newton); later ones take the
-        secant, which always settles.
-    solver
-        ``"pardiso"``, ``"superlu"`` or None (the best installed).
-    precision
-        ``"mixed"``: the factorisation in single precision, its solutions refined by conjugate
-        gradients to ``cg_rtol`` (:mod:`.linear`); ``"double"``: a double-precision factor.
-    """
-
-    tolerance: float = 0.005
-    first_step_s: float | None = None
-    max_step_s: float = 1.0
-    contact_tolerance: float = 1e-4
-    max_rounds: int = 30
-    cg_iterations: int = 12
-    cg_rtol: float = 1e-9
-    round_rtol: float = 1e-6
-    friction_rtol: float = 1e-3
-    stick_mm: float = 1e-2
-    newton_rounds: int = 8
-    solver: str | None = None
-    precision: str = "mixed"
 
 
 @dataclass

@@ -48,6 +48,7 @@ import numpy as np
 from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rates
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
+from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
 
 MM = 1e-3
@@ -120,50 +121,6 @@ def pod_basis(runs: Sequence[CreepResult], energy: float = 1.0 - 1e-8, max_modes
                         float(runs[0].stats.get("advance_at_rest_mm", 0.0)), sigma,
                         float(np.sqrt((x[:-1].reshape(-1, 3, x.shape[1]) ** 2).sum(axis=1)).max()) / MM,
                         np.vstack(rates))
-
-
-@dataclass
-class ReducedSettings:
-    """Numerical settings of the reduced model.
-
-    Attributes
-    ----------
-    energy, max_modes
-        What :func:`pod_basis` keeps.
-    contact_reach
-        Contact candidates: the surface nodes closer to a solid at rest than the snapshots'
-        largest node motion plus this many spacings.
-    contact_tolerance
-        A candidate is in contact when its gap is below this many spacings.
-    friction
-        Coulomb's friction on the candidates (:mod:`.reduced_friction`); False leaves sliding
-        free (the reduced model before it, kept to measure what friction buys).
-    friction_touch
-        A friction candidate presses while its gap is below this many spacings.
-    friction_rounds, friction_rtol
-        A step re-linearises the friction at most this many times, until the law holds to
-        ``friction_rtol`` of each node's μ_f λ_n.
-    hyper_reduction, hyper_tolerance, hyper_samples
-        Eq. 16's viscosity on ECSW's sampled voxels (:mod:`.hyper`), fitted to this relative
-        error on ``hyper_samples`` of the snapshots' velocities; False sums every voxel.
-    tolerance, max_step_s, first_step_s
-        The step controller's, as :class:`~.integrate.CreepSettings` (spacings, s).
-    """
-
-    energy: float = 1.0 - 1e-8
-    max_modes: int = 40
-    contact_reach: float = 1.0
-    contact_tolerance: float = 1e-4
-    friction: bool = True
-    friction_touch: float = 1e-2
-    friction_rounds: int = 4
-    friction_rtol: float = 1e-2
-    hyper_reduction: bool = True
-    hyper_tolerance: float = 1e-3
-    hyper_samples: int = 8
-    tolerance: float = 0.005
-    max_step_s: float = 1.0
-    first_step_s: float | None = None
 
 
 class ReducedCreep:

@@ -7,10 +7,18 @@ CMA-ES or the paper's Table 1; space mapping to the final model; uncertainty) â†
 :func:`~.store.save_calibration`. Prediction is :mod:`hifumotion.prediction`.
 """
 
-from hifumotion.estimation.model import ModelRun, ModelSettings, ModelSpec, Parameters, model_spec, run_model
-from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
-from hifumotion.estimation.prepare import Observation, prepare
-from hifumotion.estimation.protocol import default_frames
+import importlib
 
-__all__ = ["ModelRun", "ModelSettings", "ModelSpec", "Parameters", "model_spec", "run_model", "TrainingData",
-           "frame_sums_mm", "residuals_mm", "Observation", "prepare", "default_frames"]
+# names â†’ their modules, imported on first use (the forward model pulls the solvers)
+_WHERE = {"ModelRun": "model", "ModelSettings": "settings", "ModelSpec": "model", "Parameters": "model",
+          "model_spec": "model", "run_model": "model", "TrainingData": "objective", "frame_sums_mm": "objective",
+          "residuals_mm": "objective", "Observation": "prepare", "prepare": "prepare", "default_frames": "protocol"}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        return getattr(importlib.import_module(f"hifumotion.estimation.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'hifumotion.estimation' has no attribute {name!r}")
+
+
+__all__ = sorted(_WHERE)

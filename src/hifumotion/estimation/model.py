@@ -32,9 +32,8 @@ from typing import Protocol
 
 import numpy as np
 
-from hifumotion.creep.integrate import CreepSettings
-from hifumotion.creep.reduced import ReducedSettings
 from hifumotion.errors import InputError
+from hifumotion.estimation.settings import INTEGRATORS, ModelSettings
 from hifumotion.particles.quasi_static import settling
 from hifumotion.particles.scene import (BYTES_PER_PARTICLE, BarConfig, ParticleConfig, PhysicsConfig, RunConfig,
                                         Scene, TankConfig, TissueConfig, spacing_for_count, touching_tip)
@@ -57,48 +56,6 @@ class Parameters:
 
     def replaced(self, **changes: float) -> "Parameters":
         return replace(self, **changes)
-
-
-@dataclass
-class ModelSettings:
-    """Numerical settings of the fitted model (not fitted themselves)."""
-
-    tissue_particles: int = paper.TISSUE_PARTICLES  # the paper's count of tissue particles
-    support_factor: float = 2.0         # kernel support h in spacings
-    mass_scaling: float = 2.0e4         # inertia multiplier of the quasi-static push
-    settle_periods: float = 6.0         # settling time in 1/ω of the slowest elastic mode
-    cfl: float = 0.4                    # safety factor on the time step
-    max_step_s: float = 5e-3            # largest time step (s)
-    force_ramp_s: float | None = None   # the force's linear rise (s); default: setup.json's push.ramp_s
-    tissue_density_kg_m3: float = 1050.0
-    rate_floor_per_s: float = 0.02      # floor of the shear rate in Eq. 16's μ (1/s); a regularisation, not fitted
-    contour_points: int = 64            # size of the point set A
-    integrator: str = "implicit"        # one of FORWARD_MODELS: "implicit", the fast path (hifumotion.creep);
-                                        # "explicit", Eq. 8–20 as the paper; "reduced", the fast path's
-                                        # POD–Galerkin model (hifumotion.creep.reduced)
-    reduced_span: tuple[float, float] = (0.5, 2.0)   # F/E multiples of the full runs the reduced model's modes come from
-    creep: CreepSettings = field(default_factory=CreepSettings)        # the implicit path's (and the snapshots')
-    reduced: ReducedSettings = field(default_factory=ReducedSettings)  # the reduced model's
-
-    def __post_init__(self):
-        if self.integrator not in FORWARD_MODELS:
-            raise InputError(f"unknown integrator {self.integrator!r}; expected {', '.join(FORWARD_MODELS)}",
-                             "integrator")
-        # from parameters.json: the nested settings arrive as dicts
-        for name, kind in (("creep", CreepSettings), ("reduced", ReducedSettings)):
-            value = getattr(self, name)
-            if isinstance(value, dict):
-                unknown = sorted(set(value) - set(kind.__dataclass_fields__))
-                if unknown:
-                    raise InputError(f"unknown settings {unknown}; expected some of "
-                                     f"{sorted(kind.__dataclass_fields__)}", f"model_settings.{name}")
-                setattr(self, name, kind(**value))
-            elif not isinstance(value, kind):
-                raise InputError(f"expected {kind.__name__}, got {type(value).__name__}", f"model_settings.{name}")
-        span = tuple(float(x) for x in self.reduced_span)
-        if len(span) != 2 or not (0 < span[0] < span[1] and np.isfinite(span[1])):
-            raise InputError(f"expected two F/E multiples 0 < low < high, got {self.reduced_span}", "reduced_span")
-        self.reduced_span = span
 
 
 @dataclass
@@ -298,6 +255,7 @@ def _reduced(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
 
 #: The integrators behind :func:`run_model`, by ``ModelSettings.integrator``.
 FORWARD_MODELS: dict[str, ForwardModel] = {"implicit": _implicit, "explicit": _explicit, "reduced": _reduced}
+assert tuple(FORWARD_MODELS) == INTEGRATORS, "every integrator the settings accept has a forward model"
 
 
 def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -> ModelRun:

@@ -4,39 +4,22 @@ Read anything with :func:`read_sequence`; write results with the ``write_*``
 functions, all atomic; give each run its own folder with :func:`output_folder`.
 """
 
-from hifumotion.io.files import atomic_path, check_output_folder, output_folder, write_text
-from hifumotion.io.init_json import load_initial_contours, read_init_json
-from hifumotion.io.reader import SUPPORTED, read_sequence
-from hifumotion.io.writers import (
-    read_contours_csv,
-    read_mask,
-    write_contours_csv,
-    write_contours_json,
-    write_json,
-    write_mask_png,
-    write_masks_nifti,
-    write_nifti,
-    write_png_stack,
-    write_sequence_nifti,
-)
+import importlib
 
-__all__ = [
-    "SUPPORTED",
-    "atomic_path",
-    "check_output_folder",
-    "load_initial_contours",
-    "output_folder",
-    "read_contours_csv",
-    "read_init_json",
-    "read_mask",
-    "read_sequence",
-    "write_contours_csv",
-    "write_contours_json",
-    "write_json",
-    "write_mask_png",
-    "write_masks_nifti",
-    "write_nifti",
-    "write_png_stack",
-    "write_sequence_nifti",
-    "write_text",
-]
+# names → their modules, imported on first use (the readers pull SimpleITK, pydicom, OpenCV;
+# a configuration's validation needs none of them)
+_WHERE = {"atomic_path": "files", "check_output_folder": "files", "output_folder": "files", "write_text": "files",
+          "load_initial_contours": "init_json", "read_init_json": "init_json", "SUPPORTED": "reader",
+          "read_sequence": "reader", "read_contours_csv": "writers", "read_mask": "writers",
+          "write_contours_csv": "writers", "write_contours_json": "writers", "write_json": "writers",
+          "write_mask_png": "writers", "write_masks_nifti": "writers", "write_nifti": "writers",
+          "write_png_stack": "writers", "write_sequence_nifti": "writers"}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        return getattr(importlib.import_module(f"hifumotion.io.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'hifumotion.io' has no attribute {name!r}")
+
+
+__all__ = sorted(_WHERE)

@@ -10,10 +10,18 @@ path goes from a user's files through here to the fit without touching the twin.
   imaging system's measured offset.
 """
 
-from hifumotion.observed.boundary import shift_boundary
-from hifumotion.observed.folder import Observed, load_observed, write_observed
-from hifumotion.observed.setup import (SCHEMA_VERSION, BarSetup, ImagingGeometry, PushSchedule, Setup, TankSetup,
-                                       read_setup, write_setup)
+import importlib
 
-__all__ = ["Observed", "load_observed", "write_observed", "Setup", "ImagingGeometry", "TankSetup", "BarSetup",
-           "PushSchedule", "SCHEMA_VERSION", "read_setup", "write_setup", "shift_boundary"]
+# names → their modules, imported on first use (the folder's reader pulls the image stack)
+_WHERE = {"shift_boundary": "boundary", "Observed": "folder", "load_observed": "folder", "write_observed": "folder",
+          "SCHEMA_VERSION": "setup", "BarSetup": "setup", "ImagingGeometry": "setup", "PushSchedule": "setup",
+          "Setup": "setup", "TankSetup": "setup", "read_setup": "setup", "write_setup": "setup"}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        return getattr(importlib.import_module(f"hifumotion.observed.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'hifumotion.observed' has no attribute {name!r}")
+
+
+__all__ = sorted(_WHERE)

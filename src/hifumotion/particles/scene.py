@@ -203,12 +203,14 @@ def estimated_particles(scene: Scene) -> float:
     return (x * z * wet + walls + tissue) / dx ** 3
 
 
-def load_scene(path: str | Path) -> Scene:
-    """A :class:`Scene` from a TOML or YAML file (relative CSV paths are relative to it)."""
-    from hifumotion.config import load_config
+def load_scene(path: str | Path | None, settings: list[str] | None = None) -> Scene:
+    """A :class:`Scene` from a TOML or YAML file (relative CSV paths are relative to it; None:
+    the defaults), with ``settings`` (``KEY=VALUE``, :func:`~hifumotion.config.apply_settings`) changed."""
+    from hifumotion.config import apply_settings, read_config_file, validate_config
 
-    scene = load_config(path, Scene)
-    if scene.tissue.particles_csv is not None and not scene.tissue.particles_csv.is_absolute():
+    data = read_config_file(path) if path is not None else {}
+    scene = validate_config(Scene, apply_settings(data, settings), path if path is not None else "--set")
+    if path is not None and scene.tissue.particles_csv is not None and not scene.tissue.particles_csv.is_absolute():
         scene.tissue.particles_csv = Path(path).parent / scene.tissue.particles_csv
     return scene
 

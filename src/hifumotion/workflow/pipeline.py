@@ -27,14 +27,17 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Literal
+from typing import TYPE_CHECKING, Callable, Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from hifumotion.config import ConfigModel
-from hifumotion.observed import Observed
+from hifumotion.estimation.settings import ModelSettings
 from hifumotion import paper
+
+if TYPE_CHECKING:      # the observed folder's reader pulls the image stack: imported where it runs
+    from hifumotion.observed import Observed
 
 Progress = Callable[[str, float], None]
 
@@ -49,7 +52,6 @@ class EstimationConfig(ConfigModel):
     validation_frames: str | None = Field(
         None, description="validation frames, same forms (default: the paper's protocol scaled to the series)")
     force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
-    particles: int = Field(paper.TISSUE_PARTICLES, ge=100, le=1_000_000, description="tissue particles of the fitted model (the paper: 4,399)")
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     search_integrator: Literal["implicit", "reduced"] | None = Field(
         None, description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre and again around the first optimum); default: the calibration's (estimation.calibrate.CalibrationSettings)")
@@ -67,6 +69,24 @@ class EstimationConfig(ConfigModel):
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
     workers: int | None = Field(None, ge=1, description="Dask worker processes of the local cluster (default: the cores)")
     scheduler_address: str | None = Field(None, description="an existing Dask cluster, tcp://host:8786")
+    model: ModelSettings = Field(
+        default_factory=ModelSettings, description="the fitted model's settings: its tissue particles (the paper: 4,399), integrator and each integrator's own (creep: the fast path's; reduced: its reduced model's); estimation.particles is short for model.tissue_particles")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _particles_are_the_models(cls, data):
+        # ``particles`` (the option's and earlier configurations' name) is the model's tissue
+        # particles: one setting, one home
+        if isinstance(data, dict) and "particles" in data:
+            data = dict(data)
+            model = data.get("model")
+            model = dict(model) if isinstance(model, dict) else ({} if model is None else model)
+            if isinstance(model, dict):
+                if "tissue_particles" in model:
+                    raise ValueError("particles and model.tissue_particles are one setting; give it once")
+                model["tissue_particles"] = data.pop("particles")
+                data["model"] = model
+        return data
 
     @field_validator("scheduler_address")
     @classmethod
@@ -113,7 +133,6 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
     from contextlib import nullcontext
 
     from hifumotion.estimation.calibrate import CalibrationSettings, calibrate
-    from hifumotion.estimation.model import ModelSettings
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.store import save_calibration
 
@@ -131,7 +150,7 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
     with stage("calibrate"):
         cal = calibrate(observation, CalibrationSettings(
             method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
-            model=ModelSettings(tissue_particles=s.particles), max_evaluations=s.max_evaluations, objective=s.objective,
+            model=s.model, max_evaluations=s.max_evaluations, objective=s.objective,
             quality_weights=s.quality_weights, bar_motion=s.bar_motion,
             workers=s.workers, scheduler_address=s.scheduler_address,
             **({} if s.search_integrator is None else {"search_integrator": s.search_integrator})),
@@ -159,7 +178,7 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
     from contextlib import nullcontext
 
     from hifumotion.estimation.protocol import default_frames, parse_frames
-    from hifumotion.observed import load_observed
+    from hifumotion.observed import Observed, load_observed
     from hifumotion.io import write_json
     from hifumotion.io.files import write_text
     from hifumotion.prediction.evaluate import evaluate, online_schedule

@@ -103,12 +103,13 @@ def example_text() -> str:
             + dump_toml(example_config()))
 
 
-def load_run_config(path: str | Path) -> tuple[RunConfig, Path]:
-    """The configuration and the folder its relative paths are relative to."""
-    from hifumotion.config import load_config
+def load_run_config(path: str | Path, settings: list[str] | None = None) -> tuple[RunConfig, Path]:
+    """The configuration, with ``settings`` (``KEY=VALUE``: :func:`~hifumotion.config.apply_settings`)
+    changed, and the folder its relative paths are relative to."""
+    from hifumotion.config import apply_settings, read_config_file, validate_config
 
     p = Path(path)
-    return load_config(p, RunConfig), p.resolve().parent
+    return validate_config(RunConfig, apply_settings(read_config_file(p), settings), p), p.resolve().parent
 
 
 def run_inputs(cfg: RunConfig, base: Path) -> list[Path]:

@@ -1,0 +1,119 @@
+"""The forward models' numerical settings, as plain data (no solver imported).
+
+:class:`CreepSettings` (the fast path, :mod:`.integrate`) and :class:`ReducedSettings` (its
+reduced model, :mod:`.reduced`) are reached from a run's configuration
+(``[estimation.model.creep]``, ``[estimation.model.reduced]``) and ``--set``: they are
+validated there by their annotations — a value's type, and the ranges the ``Annotated``
+bounds give — and passed on to the solver as they are. Their defaults live here only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+from annotated_types import Ge, Gt, Le, Lt
+
+Positive = Annotated[float, Gt(0)]
+Fraction = Annotated[float, Gt(0), Lt(1)]
+Count = Annotated[int, Ge(1)]
+
+
+@dataclass
+class CreepSettings:
+    """Numerical settings of the fast path.
+
+    Attributes
+    ----------
+    tolerance
+        Local error of a step (backward Euler's ½ Δt |Δu̇|), in particle spacings.
+    first_step_s, max_step_s
+        The first step and the largest one (s); the first defaults to the output interval / 4.
+    contact_tolerance
+        A free node closer than this many spacings *behind* a surface is put in contact.
+    max_rounds
+        Rounds of the active-set rules and the friction's linearisation per step.
+    cg_iterations, cg_rtol
+        Conjugate-gradient budget before a fresh factorisation, and the relative residual of
+        a step's solution.
+    round_rtol
+        The relative residual of a round's solution (the rounds only decide the contact set
+        and the friction's linearisation; the last one is solved on to ``cg_rtol``).
+    friction_rtol
+        A step's rounds end when no contact changed and every contact's friction, at its
+        new normal reaction, is the linearised one to this fraction of μ_f λ_n.
+    stick_mm
+        The elastic stick's reach ε (mm): a contact sticks up to this tangential
+        displacement from its anchor and slides beyond it. 10 µm, a hundredth of a
+        spacing (the FE truth's is 1 µm): the same motion to 0.5 µm of its error against
+        the truth, a third fewer solves (docs/decisions.md).
+    newton_rounds
+        Rounds that linearise the friction by its tangent (Newton); later ones take the
+        secant, which always settles.
+    solver
+        ``"pardiso"``, ``"superlu"`` or None (the best installed).
+    precision
+        ``"mixed"``: the factorisation in single precision, its solutions refined by conjugate
+        gradients to ``cg_rtol`` (:mod:`.linear`); ``"double"``: a double-precision factor.
+    """
+
+    tolerance: Positive = 0.005
+    first_step_s: Positive | None = None
+    max_step_s: Positive = 1.0
+    contact_tolerance: Annotated[float, Ge(0)] = 1e-4
+    max_rounds: Count = 30
+    cg_iterations: Count = 12
+    cg_rtol: Fraction = 1e-9
+    round_rtol: Fraction = 1e-6
+    friction_rtol: Fraction = 1e-3
+    stick_mm: Positive = 1e-2
+    newton_rounds: Annotated[int, Ge(0)] = 8
+    solver: Literal["pardiso", "superlu"] | None = None
+    precision: Literal["mixed", "double"] = "mixed"
+
+
+@dataclass
+class ReducedSettings:
+    """Numerical settings of the reduced model.
+
+    Attributes
+    ----------
+    energy, max_modes
+        What :func:`pod_basis` keeps.
+    contact_reach
+        Contact candidates: the surface nodes closer to a solid at rest than the snapshots'
+        largest node motion plus this many spacings.
+    contact_tolerance
+        A candidate is in contact when its gap is below this many spacings.
+    friction
+        Coulomb's friction on the candidates (:mod:`.reduced_friction`); False leaves sliding
+        free (the reduced model before it, kept to measure what friction buys).
+    friction_touch
+        A friction candidate presses while its gap is below this many spacings.
+    friction_rounds, friction_rtol
+        A step re-linearises the friction at most this many times, until the law holds to
+        ``friction_rtol`` of each node's μ_f λ_n.
+    hyper_reduction, hyper_tolerance, hyper_samples
+        Eq. 16's viscosity on ECSW's sampled voxels (:mod:`.hyper`), fitted to this relative
+        error on ``hyper_samples`` of the snapshots' velocities; False sums every voxel.
+    tolerance, max_step_s, first_step_s
+        The step controller's, as :class:`~.integrate.CreepSettings` (spacings, s).
+    """
+
+    energy: Fraction = 1.0 - 1e-8
+    max_modes: Annotated[int, Ge(1), Le(1000)] = 40
+    contact_reach: Annotated[float, Ge(0)] = 1.0
+    contact_tolerance: Annotated[float, Ge(0)] = 1e-4
+    friction: bool = True
+    friction_touch: Positive = 1e-2
+    friction_rounds: Count = 4
+    friction_rtol: Fraction = 1e-2
+    hyper_reduction: bool = True
+    hyper_tolerance: Fraction = 1e-3
+    hyper_samples: Count = 8
+    tolerance: Positive = 0.005
+    max_step_s: Positive = 1.0
+    first_step_s: Positive | None = None
+
+
+__all__ = ["CreepSettings", "ReducedSettings"]
