@@ -389,6 +389,36 @@ CASES = [
 ]
 
 
+# every argument that names a file or folder, given each kind of path a user gets wrong: one that
+# does not exist, a FIFO (reading it would block), a device, an empty file, bytes of nothing, a
+# folder where a file is due, a symbolic link to itself
+PATH_SLOTS = [
+    ["info", "{}"],
+    ["segment", "{}", "--init", "ph/init.json", "-o", "out"],
+    ["segment", "ph/images/phantom.png", "--init", "{}", "-o", "out"],
+    ["compare", "{}", "-o", "out"],
+    ["reconstruct", "{}", "--slice-spacing", "1", "--spacing", "0.2", "-o", "out"],
+    ["track", "{}", "--init", "mask40.png", "-o", "out"],
+    ["track", "good.nii.gz", "--init", "{}", "-o", "out"],
+    ["track", "good.nii.gz", "--init", "mask40.png", "--setup", "{}", "-o", "out"],
+    ["track", "good.nii.gz", "--init", "mask40.png", "--exclude", "{}", "-o", "out"],
+    ["track", "good.nii.gz", "--init", "mask40.png", "--bar", "{}", "-o", "out"],
+    ["simulate", "{}", "-o", "out"],
+    ["experiment", "--config", "{}", "-o", "out"],
+    ["calibrate", "{}", "-o", "out"],
+    ["calibrate", "ph", "--resume", "{}", "-o", "out"],
+    ["predict", "{}", "-o", "out"],
+    ["online", "{}", "ph", "-o", "out"],
+    ["score", "{}", "ph/masks"],
+    ["score", "ph/masks", "{}"],
+    ["run", "{}", "-o", "out"],
+    ["demo", "--dataset", "{}", "-o", "out"],
+]
+HOSTILE_PATHS = ["no_such_path", "fifo.png", "/dev/null", "empty.png", "garbage.png", "empty_folder", "loop"]
+CASES += [([a.format(path) for a in slot], path) for slot in PATH_SLOTS for path in HOSTILE_PATHS
+          if not (slot[0] == "info" and path in ("fifo.png", "/dev/null", "empty.png", "garbage.png", "empty_folder"))]
+
+
 @pytest.mark.parametrize("argv, word", CASES, ids=[" ".join(c[0])[:60] for c in CASES])
 def test_a_mistake_is_one_line_naming_it_and_changes_nothing(scratch, argv, word, monkeypatch):
     monkeypatch.chdir(scratch)
@@ -406,7 +436,7 @@ def test_a_mistake_is_one_line_naming_it_and_changes_nothing(scratch, argv, word
 
 
 def test_enough_hostile_cases():
-    assert len(CASES) >= 60 and len({c[0][0] for c in CASES}) >= 13
+    assert len(CASES) >= 280 and len({c[0][0] for c in CASES}) >= 15
 
 
 def test_overwrite_replaces_only_what_hifumotion_wrote(scratch, monkeypatch):

@@ -8,10 +8,12 @@
 3. **Search** on the search model, every batch of runs in parallel on Dask:
    the best of a small data-free initial design, then bounded least squares
    (default), CMA-ES, or the paper's Table 1 algorithm. A reduced search model is
-   made around the design's centre (its two snapshot runs in parallel), and made
-   again around the first search's optimum, from which the search runs once more:
-   the modes are then those of the parameters the fit ends at.
-4. **Map to the paper's resolution** (output space mapping): a run of the final
+   made around the design's centre (its two snapshot runs in parallel); the search
+   then runs a second time, from its optimum, on the *final* model's reduced model
+   made around that optimum — the fit ends on the final model near its own
+   parameters, and one run of the full final model at the fit checks it
+   (``full_model_check``, its residual beside the reduced one's in ``parameters.json``).
+4. **Map to the paper's resolution** (implicit search only; output space mapping): a run of the final
    model at the search optimum; the difference of its residuals from the search
    model's is taken as fixed, and a Gauss–Newton step with the search model's
    Jacobian moves the parameters to where the final model fits; repeated
@@ -24,7 +26,8 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from contextlib import nullcontext
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Literal
 
@@ -59,6 +62,9 @@ class CalibrationSettings:
     # POD–Galerkin model made around the design's centre and again around the first optimum
     # (docs/decisions.md, issue 39); "implicit", its full runs
     search_integrator: str = "implicit"
+    # with the reduced search: one run of the full final model at the fit, its residual recorded
+    # beside the reduced model's
+    full_model_check: bool = True
     model: ModelSettings = field(default_factory=ModelSettings)
     max_evaluations: int = 8                        # least squares: function evaluations
     cma_generations: int = 12
@@ -186,35 +192,44 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             centres.append(np.mean(space.initial_design(), axis=0))
             timings["reduced_model_s"] = ev.reduce_around(centres[-1])
         theta0, design = fitting.initial_guess(ev)
-        for search_pass in range(2 if reduced else 1):
-            if search_pass:
-                # the modes again, around the first optimum: the fit ends on the model of its own parameters
-                centres.append(theta)
-                timings["reduced_model_s"] += ev.reduce_around(theta)
-                theta0 = theta
-            if s.method == "least_squares":
-                fit_result = fitting.least_squares_fit(ev, theta0, s.max_evaluations)
-                theta = fit_result.theta
-            elif s.method == "cmaes":
-                fit_result = fitting.cmaes_fit(ev, theta0, s.cma_generations, seed=s.seed)
-                theta = fit_result.theta
-            else:
-                table1 = iterative_estimate(ev, theta0, s.threshold_mm_per_point, s.table1_max_runs)
-                theta = table1.theta
+        fit_result, table1, theta = _search(ev, s, theta0)
+        fit_spec = final
         if reduced:
-            mapped["reduced_model_centres"] = [c.tolist() for c in centres]
-        timings["search_s"] = time.perf_counter() - t1
-        t2 = time.perf_counter()
-        unc = fitting.uncertainty(ev, theta)
-        j = fitting.jacobian(ev, theta)
-        if s.degeneracy_check:
-            degeneracy = fitting.degeneracy(ev, theta)
-        timings["uncertainty_s"] = time.perf_counter() - t2
-        tell("search", 1.0)
+            # the second pass: the final model's own reduced model, its modes around the first
+            # optimum, so that the fit ends on the final model near its own parameters (no
+            # space mapping between two resolutions is left to do)
+            final.voxels()      # made once here: the workers' snapshot runs and this process share it
+            fit_spec = replace(final, settings=replace(final.settings, integrator="reduced"))
+            centres.append(theta)
+        with (ev.sibling(fit_spec) if reduced else nullcontext(ev)) as fit_ev:
+            if reduced:
+                timings["reduced_model_s"] += fit_ev.reduce_around(theta)
+                fit_result, table1, theta = _search(fit_ev, s, theta)
+                mapped["reduced_model_centres"] = [c.tolist() for c in centres]
+            timings["search_s"] = time.perf_counter() - t1
+            t2 = time.perf_counter()
+            unc = fitting.uncertainty(fit_ev, theta)
+            j = fitting.jacobian(fit_ev, theta)
+            if s.degeneracy_check:
+                degeneracy = fitting.degeneracy(fit_ev, theta)
+            timings["uncertainty_s"] = time.perf_counter() - t2
+            tell("search", 1.0)
+            if reduced and s.full_model_check:
+                # the full model at the fit: its residual beside the reduced model's (parameters.json)
+                t3 = time.perf_counter()
+                with ev.sibling(final) as full_ev:
+                    r_full = full_ev.one(theta)
+                r_reduced = fit_ev.one(theta)
+                mapped["full_model_check"] = {
+                    "cost_reduced_model_mm": float(np.abs(r_reduced).sum()),
+                    "cost_full_model_mm": float(np.abs(r_full).sum()),
+                    "S_t_reduced_model_mm": frame_sums_mm(r_reduced).round(3).tolist(),
+                    "S_t_full_model_mm": frame_sums_mm(r_full).round(3).tolist()}
+                timings["full_model_check_s"] = time.perf_counter() - t3
 
         # one model only (the search ran at the final resolution): nothing to map
         coarser = search_settings.tissue_particles < s.model.tissue_particles
-        if s.space_mapping and s.mapping_runs > 0 and coarser:
+        if s.space_mapping and s.mapping_runs > 0 and coarser and not reduced:
             t3 = time.perf_counter()
             r_search = ev.one(theta)
             # only the coordinates the data determine move, by at most MAX_MAPPING_STEP step units
@@ -248,6 +263,18 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), fit_result, table1,
                        mapped, degeneracy, unc.correlation.round(3).tolist(), final, search, observation,
                        ev.runs, timings, ev.failed, objective)
+
+
+def _search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray):
+    """``s.method`` from ``theta0`` on ``ev``'s model: ``(fit result, Table 1 result, θ)``."""
+    if s.method == "least_squares":
+        fit_result = fitting.least_squares_fit(ev, theta0, s.max_evaluations)
+        return fit_result, None, fit_result.theta
+    if s.method == "cmaes":
+        fit_result = fitting.cmaes_fit(ev, theta0, s.cma_generations, seed=s.seed)
+        return fit_result, None, fit_result.theta
+    table1 = iterative_estimate(ev, theta0, s.threshold_mm_per_point, s.table1_max_runs)
+    return None, table1, table1.theta
 
 
 def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:

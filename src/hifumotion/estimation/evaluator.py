@@ -33,6 +33,22 @@ from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residua
 from hifumotion.estimation.space import SearchSpace
 
 
+@contextmanager
+def _sigint_ignored():
+    """SIGINT ignored inside the block (in the main thread; elsewhere signals cannot be set)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _use_threads(threads: int | None) -> None:
     """Numba and MKL threads of a task (1 on a worker: the workers are the parallelism; None
     leaves the process's setting)."""
@@ -197,9 +213,14 @@ class Evaluator:
             except (OSError, ValueError, TimeoutError) as exc:
                 raise InputError(f"cannot reach the Dask scheduler ({brief(exc)})", self.scheduler_address) from None
         else:
-            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                         dashboard_address=None,
-                                         silence_logs=logging.WARNING if log.isEnabledFor(logging.DEBUG) else logging.CRITICAL)
+            # the workers start with Ctrl-C ignored (an ignored signal stays ignored in a spawned
+            # process): a Ctrl-C in the terminal reaches the whole process group, and each worker
+            # would print its own traceback while this process closes them anyway
+            with _sigint_ignored():
+                self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                             dashboard_address=None,
+                                             silence_logs=logging.WARNING if log.isEnabledFor(logging.DEBUG)
+                                             else logging.CRITICAL)
             self._client = Client(self._cluster)
             self._cores = self.workers
         try:
