@@ -62,6 +62,8 @@ def build_scratch(root: Path) -> Path:
     _write_png(root / "image.png", image)
     yy, xx = np.mgrid[:64, :64]
     disc = ((yy - 32) ** 2 + (xx - 30) ** 2 < 15 ** 2)
+    for k in range(3):                                     # a prediction's masks, frame by frame
+        _write_png(root / "frame_masks" / f"frame_{k:04d}.png", (disc * 255).astype(np.uint8))
     for k in range(4):                                     # a sweep of binary masks
         _write_png(root / "masks" / f"slice_{k:03d}.png", (disc * 255).astype(np.uint8))
         _write_png(root / "grey_masks" / f"slice_{k:03d}.png", (disc * 128 + 40).astype(np.uint8))
@@ -409,14 +411,29 @@ PATH_SLOTS = [
     ["calibrate", "ph", "--resume", "{}", "-o", "out"],
     ["predict", "{}", "-o", "out"],
     ["online", "{}", "ph", "-o", "out"],
-    ["score", "{}", "ph/masks"],
-    ["score", "ph/masks", "{}"],
+    ["score", "{}", "frame_masks", "--spacing", "0.2"],
+    ["score", "frame_masks", "{}", "--spacing", "0.2"],
     ["run", "{}", "-o", "out"],
     ["demo", "--dataset", "{}", "-o", "out"],
 ]
 HOSTILE_PATHS = ["no_such_path", "fifo.png", "/dev/null", "empty.png", "garbage.png", "empty_folder", "loop"]
 CASES += [([a.format(path) for a in slot], path) for slot in PATH_SLOTS for path in HOSTILE_PATHS
           if not (slot[0] == "info" and path in ("fifo.png", "/dev/null", "empty.png", "garbage.png", "empty_folder"))]
+# every option that takes a positive length or time, given what is no such number
+POSITIVE_OPTIONS = [
+    (["phantom", "-o", "out", "--spacing", "{}"], "--spacing"),
+    (["reconstruct", "masks", "--spacing", "0.2", "-o", "out", "--slice-spacing", "{}"], "--slice-spacing"),
+    (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "-o", "out", "--voxel", "{}"], "--voxel"),
+    (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "-o", "out", "--particle-spacing", "{}"],
+     "--particle-spacing"),
+    (["calibrate", "ph", "-o", "out", "--force", "{}"], "--force"),
+    (["info", "image.png", "--frame-interval", "{}"], "--frame-interval"),
+    (["track", "good.nii.gz", "--init", "mask40.png", "-o", "out", "--frame-interval", "{}"], "--frame-interval"),
+    (["track", "good.nii.gz", "--init", "mask40.png", "-o", "out", "--spacing", "{}"], "--spacing"),
+    (["score", "frame_masks", "frame_masks", "--spacing", "{}"], "--spacing"),
+]
+CASES += [([a.format(value) for a in argv], word) for argv, word in POSITIVE_OPTIONS
+          for value in ("nan", "inf", "-inf", "-1", "0", "abc", "1e400")]
 
 
 @pytest.mark.parametrize("argv, word", CASES, ids=[" ".join(c[0])[:60] for c in CASES])
@@ -436,7 +453,7 @@ def test_a_mistake_is_one_line_naming_it_and_changes_nothing(scratch, argv, word
 
 
 def test_enough_hostile_cases():
-    assert len(CASES) >= 280 and len({c[0][0] for c in CASES}) >= 15
+    assert len(CASES) >= 300 and len({c[0][0] for c in CASES}) >= 15
 
 
 def test_overwrite_replaces_only_what_hifumotion_wrote(scratch, monkeypatch):

@@ -16,7 +16,7 @@ from hifumotion.errors import InputError
 @app.command()
 def reconstruct(
     sweep: Path = typer.Argument(..., help="Masks of the sweep's slices: a folder of mask PNGs, a NIfTI/MHA/NRRD volume or DICOM series."),
-    slice_spacing: Optional[float] = typer.Option(None, "--slice-spacing", help="Gap between slices in mm (when the file has no positions)."),
+    slice_spacing: Optional[float] = typer.Option(None, "--slice-spacing", callback=positive, help="Gap between slices in mm (when the file has no positions)."),
     spacing: Optional[str] = typer.Option(None, "--spacing", help="In-plane pixel size in mm: '0.2' or 'row,col'. Overrides the file."),
     voxel: Optional[float] = typer.Option(None, "--voxel", callback=positive, help="Voxel size of the volume in mm (default from the sweep)."),
     particle_spacing: Optional[float] = typer.Option(None, "--particle-spacing", callback=positive, help="Also write particles on a lattice of this spacing (mm)."),

@@ -30,10 +30,11 @@ def score(
     for folder in (prediction_dir, truth_dir):
         if not folder.is_dir():
             raise InputError("no such folder (expected frames/frame_NNNN.png masks)", folder)
+    # the masks first, in the order given: a folder without them is named before any setting is sought
+    predicted, truth = read_frame_masks(prediction_dir), read_frame_masks(truth_dir)
     pixel = spacing if spacing is not None else pixel_size_mm(truth_dir)
     record = RunRecord("score", config={"prediction_dir": str(prediction_dir), "truth_dir": str(truth_dir),
                                         "pixel_mm": pixel})
-    predicted, truth = read_frame_masks(prediction_dir), read_frame_masks(truth_dir)
     with record.stage("score"):
         table = score_masks(predicted, truth, pixel)
     frames_dir = images if images is not None else truth_dir.parent / "observed" / "frames"

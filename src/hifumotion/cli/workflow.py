@@ -37,8 +37,12 @@ def demo(
 
     if preset not in PRESETS:
         raise InputError(f"unknown preset; choose from {', '.join(PRESETS)}", "--preset")
-    if dataset is not None and not dataset.is_dir():
-        raise InputError("no such dataset folder", dataset)
+    if dataset is not None:
+        from hifumotion.io.dataset import load_dataset
+
+        if not dataset.is_dir():
+            raise InputError("no such dataset folder", dataset)
+        load_dataset(dataset)      # read before the minutes of the twin: a wrong folder is said at once
     overrides: dict = {"workers": workers}
     if max_evaluations is not None:
         overrides["max_evaluations"] = max_evaluations

@@ -107,6 +107,8 @@ def check_search_log(path: str | Path) -> Path:
         lines = [ln for ln in p.read_text(encoding="utf-8").splitlines() if ln.strip()]
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read the search log ({brief(exc)})", p) from None
+    if not lines:
+        raise InputError("is empty; expected the search_log.jsonl of an interrupted calibration", p)
     for number, line in enumerate(lines, 1):
         try:
             rec = json.loads(line)
