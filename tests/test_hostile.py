@@ -594,3 +594,25 @@ def test_sigkill_then_the_same_command_leaves_no_staging_folder(tmp_path):
                            text=True, timeout=120)
     assert again.returncode == 0, again.stderr
     assert not list(tmp_path.glob(".twin.*.partial"))
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_a_calibration_is_one_line_and_leaves_nothing(small_twin, tmp_path):
+    """Ctrl-C reaches the whole process group, Dask's workers too: they ignore it, the command
+    closes them and says one line (it printed ~70 lines of worker tracebacks)."""
+    folder, _ = small_twin
+    proc = subprocess.Popen(CLI + ["calibrate", str(folder / "observed"), "-o", "cal", "--particles", "300",
+                                   "--search-particles", "150", "--workers", "2"],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    deadline = time.time() + 240
+    # the search has begun once its log exists in the staging folder
+    while time.time() < deadline and not list(tmp_path.glob(".cal.*.partial/search_log.jsonl")):
+        time.sleep(0.2)
+    assert list(tmp_path.glob(".cal.*.partial/search_log.jsonl")), "the search never started"
+    os.killpg(proc.pid, signal.SIGINT)                 # as a terminal's Ctrl-C: the whole group
+    _, err = proc.communicate(timeout=120)
+    lines = [ln for ln in err.splitlines() if ln.strip() and "%" not in ln]   # progress bars aside
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and len(lines) <= 2, err
+    assert not list(tmp_path.glob(".cal*")) and not (tmp_path / "cal").exists()

@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterable
@@ -218,7 +219,10 @@ class Evaluator:
             # the workers start with Ctrl-C ignored (an ignored signal stays ignored in a spawned
             # process): a Ctrl-C in the terminal reaches the whole process group, and each worker
             # would print its own traceback while this process closes them anyway
-            with _sigint_ignored():
+            with _sigint_ignored(), warnings.catch_warnings():
+                # another cluster on this machine holds Dask's default HTTP port: its scheduler
+                # takes another, and that is no news for the user
+                warnings.filterwarnings("ignore", message="Port .* is already in use")
                 self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                              dashboard_address=None,
                                              silence_logs=logging.WARNING if log.isEnabledFor(logging.DEBUG)
