@@ -504,13 +504,19 @@ def test_a_fifo_is_refused_at_once(scratch):
     assert proc.returncode == 2 and "fifo.png" in proc.stderr and "regular file" in proc.stderr
 
 
-def test_sigterm_leaves_no_partial_folder(tmp_path):
+def _twin_being_written(folder: Path, pattern: str = ".twin.*.partial", **popen) -> subprocess.Popen:
+    """``experiment --preset small -o twin`` started in ``folder``, once its staging folder (``pattern``) exists."""
     proc = subprocess.Popen(CLI + ["-q", "experiment", "--preset", "small", "--seed", "5", "-o", "twin"],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
     deadline = time.time() + 90
-    while time.time() < deadline and not list(tmp_path.glob(".twin.*.partial")):
+    while time.time() < deadline and not list(folder.glob(pattern)):
         time.sleep(0.2)
-    assert list(tmp_path.glob(".twin.*.partial")), "the run never started writing"
+    assert list(folder.glob(pattern)), "the run never started writing"
+    return proc
+
+
+def test_sigterm_leaves_no_partial_folder(tmp_path):
+    proc = _twin_being_written(tmp_path)
     time.sleep(1.0)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
@@ -580,12 +586,7 @@ def test_a_killed_runs_staging_folder_is_removed_by_the_next_run(tmp_path):
 
 
 def test_sigkill_then_the_same_command_leaves_no_staging_folder(tmp_path):
-    proc = subprocess.Popen(CLI + ["-q", "experiment", "--preset", "small", "--seed", "5", "-o", "twin"],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 90
-    while time.time() < deadline and not list(tmp_path.glob(".twin.*.partial")):
-        time.sleep(0.2)
-    assert list(tmp_path.glob(".twin.*.partial")), "the run never started writing"
+    proc = _twin_being_written(tmp_path)
     proc.kill()
     proc.communicate(timeout=60)
     assert list(tmp_path.glob(".twin.*.partial"))                  # what SIGKILL leaves

@@ -17,6 +17,7 @@ try:
 except PackageNotFoundError:  # running from a source tree that was not installed
     __version__ = "0.0.0+unknown"
 
+from hifumotion._lazy import lazy_exports  # noqa: E402
 from hifumotion.errors import HifuError, InputError  # noqa: E402
 
 # the image and contour types are imported on first use: they pull SciPy and Numba, which a
@@ -25,12 +26,7 @@ _LAZY = {"ImageSequence": "hifumotion.sequence", "Contour": "hifumotion.contour"
          "ClickedPoints": "hifumotion.contour"}
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'hifumotion' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _LAZY)
 
 
 __all__ = [

@@ -10,7 +10,7 @@ rigid constraints with Coulomb friction (:mod:`.contact`). :func:`~.scene.simula
 runs a :class:`~hifumotion.particles.scene.Scene` with it.
 """
 
-import importlib
+from hifumotion._lazy import lazy_exports
 
 # names → the module that defines them, imported on first use: the solvers pull Numba, SciPy
 # and PARDISO, which a command that only reads the settings (``--help``, a configuration's
@@ -20,10 +20,5 @@ _WHERE = {"Plane": "contact", "Punch": "contact", "CreepMaterial": "integrate", 
           "ReducedSettings": "settings", "VoxelMesh": "voxels", "voxel_mesh": "voxels"}
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        return getattr(importlib.import_module(f"hifumotion.creep.{_WHERE[name]}"), name)
-    raise AttributeError(f"module 'hifumotion.creep' has no attribute {name!r}")
-
-
+__getattr__ = lazy_exports(__name__, _WHERE)
 __all__ = sorted(_WHERE)

@@ -7,7 +7,7 @@ CMA-ES or the paper's Table 1; space mapping to the final model; uncertainty) â†
 :func:`~.store.save_calibration`. Prediction is :mod:`hifumotion.prediction`.
 """
 
-import importlib
+from hifumotion._lazy import lazy_exports
 
 # names â†’ their modules, imported on first use (the forward model pulls the solvers)
 _WHERE = {"ModelRun": "model", "ModelSettings": "settings", "ModelSpec": "model", "Parameters": "model",
@@ -15,10 +15,5 @@ _WHERE = {"ModelRun": "model", "ModelSettings": "settings", "ModelSpec": "model"
           "residuals_mm": "objective", "Observation": "prepare", "prepare": "prepare", "default_frames": "protocol"}
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        return getattr(importlib.import_module(f"hifumotion.estimation.{_WHERE[name]}"), name)
-    raise AttributeError(f"module 'hifumotion.estimation' has no attribute {name!r}")
-
-
+__getattr__ = lazy_exports(__name__, _WHERE)
 __all__ = sorted(_WHERE)

@@ -4,7 +4,7 @@ Read anything with :func:`read_sequence`; write results with the ``write_*``
 functions, all atomic; give each run its own folder with :func:`output_folder`.
 """
 
-import importlib
+from hifumotion._lazy import lazy_exports
 
 # names → their modules, imported on first use (the readers pull SimpleITK, pydicom, OpenCV;
 # a configuration's validation needs none of them)
@@ -16,10 +16,5 @@ _WHERE = {"atomic_path": "files", "check_output_folder": "files", "output_folder
           "write_png_stack": "writers", "write_sequence_nifti": "writers"}
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        return getattr(importlib.import_module(f"hifumotion.io.{_WHERE[name]}"), name)
-    raise AttributeError(f"module 'hifumotion.io' has no attribute {name!r}")
-
-
+__getattr__ = lazy_exports(__name__, _WHERE)
 __all__ = sorted(_WHERE)

@@ -10,7 +10,7 @@ path goes from a user's files through here to the fit without touching the twin.
   imaging system's measured offset.
 """
 
-import importlib
+from hifumotion._lazy import lazy_exports
 
 # names → their modules, imported on first use (the folder's reader pulls the image stack)
 _WHERE = {"shift_boundary": "boundary", "Observed": "folder", "load_observed": "folder", "write_observed": "folder",
@@ -18,10 +18,5 @@ _WHERE = {"shift_boundary": "boundary", "Observed": "folder", "load_observed": "
           "Setup": "setup", "TankSetup": "setup", "read_setup": "setup", "write_setup": "setup"}
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        return getattr(importlib.import_module(f"hifumotion.observed.{_WHERE[name]}"), name)
-    raise AttributeError(f"module 'hifumotion.observed' has no attribute {name!r}")
-
-
+__getattr__ = lazy_exports(__name__, _WHERE)
 __all__ = sorted(_WHERE)
