@@ -243,6 +243,9 @@ def search_comparison(reduced: dict, implicit: dict) -> dict:
                        "implicit": {k: vi[k] for k in ("dsc_mean", "dsc_min", "centroid_mean_mm")}},
         "dsc_mean_difference": d_dsc, "centroid_difference_mm": d_centroid,
         "fitted": {"reduced": reduced["fitted"], "implicit": implicit["fitted"]},
+        # the training objective of each fit on the full final model (what both searches minimise)
+        "final_model_cost_mm": {"reduced": reduced["space_mapping"].get("full_model_check", {}).get("cost_full_model_mm"),
+                                "implicit": implicit["space_mapping"].get("cost_final_model_mm")},
         "targets": {f"calibration<={REDUCED_CALIBRATION_S:.0f}s": reduced["calibration_s"] <= REDUCED_CALIBRATION_S,
                     # "as good as": no worse than the implicit search's fit by more than the margins
                     f"dsc_within_{FIT_DSC}": d_dsc >= -FIT_DSC,

@@ -605,7 +605,11 @@ def test_ctrl_c_during_a_calibration_is_one_line_and_leaves_nothing(small_twin, 
     proc = subprocess.Popen(CLI + ["calibrate", str(folder / "observed"), "-o", "cal", "--particles", "300",
                                    "--search-particles", "150", "--workers", "2"],
                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True,
+                            # as from a terminal: a test runner's worker may ignore SIGINT, and an
+                            # ignored signal stays ignored in the child (Python then installs no
+                            # KeyboardInterrupt)
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 240
     # the search has begun once its log exists in the staging folder
     while time.time() < deadline and not list(tmp_path.glob(".cal.*.partial/search_log.jsonl")):

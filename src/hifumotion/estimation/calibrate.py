@@ -8,8 +8,9 @@
 3. **Search** on the search model, every batch of runs in parallel on Dask:
    the best of a small data-free initial design, then bounded least squares
    (default), CMA-ES, or the paper's Table 1 algorithm. A reduced search model is
-   made around the design's centre (its two snapshot runs in parallel); the search
-   then runs a second time, from its optimum, on the *final* model's reduced model
+   made around the design's centre (its two snapshot runs in parallel) and again
+   around the design's best start, from which the search runs; it then runs a second
+   time, from its optimum, on the *final* model's reduced model
    made around that optimum — the fit ends on the final model near its own
    parameters, and one run of the full final model at the fit checks it
    (``full_model_check``, its residual beside the reduced one's in ``parameters.json``).
@@ -192,6 +193,11 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             centres.append(np.mean(space.initial_design(), axis=0))
             timings["reduced_model_s"] = ev.reduce_around(centres[-1])
         theta0, design = fitting.initial_guess(ev)
+        if reduced:
+            # the design's best start may be a factor 4 from the centre: the modes again around it,
+            # so that the first search starts where its model is accurate
+            centres.append(theta0)
+            timings["reduced_model_s"] += ev.reduce_around(theta0)
         fit_result, table1, theta = _search(ev, s, theta0)
         fit_spec = final
         if reduced:
