@@ -166,29 +166,18 @@ def targets(protocol: str, r: dict) -> dict:
 
 
 def _settings(text: str) -> dict:
-    """``'a=true,b=3'`` → ``{'a': True, 'b': 3}`` for :class:`CalibrationSettings` fields."""
-    from dataclasses import fields
-
+    """``'a=true,model.creep.tolerance=0.01'`` → the nested dict of :class:`CalibrationSettings`
+    fields it sets (``hifumotion --set``'s reading), checked against the model."""
+    from hifumotion.config import apply_settings, validate_config
+    from hifumotion.errors import InputError
     from hifumotion.estimation.calibrate import CalibrationSettings
 
-    known = {f.name for f in fields(CalibrationSettings)}
-    out: dict = {}
-    for item in filter(None, (part.strip() for part in text.split(","))):
-        key, sep, value = item.partition("=")
-        if not sep or key not in known:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with a field of CalibrationSettings")
-        low = value.lower()
-        out[key] = True if low == "true" else False if low == "false" else \
-            int(value) if value.lstrip("-").isdigit() else float(value) if _is_float(value) else value
-    return out
-
-
-def _is_float(text: str) -> bool:
     try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+        out = apply_settings({}, [part.strip() for part in text.split(",") if part.strip()])
+        validate_config(CalibrationSettings, out)
+    except InputError as exc:
+        raise ValueError(f"--set {text!r}: {exc}") from None
+    return out
 
 
 def run_twin(twin: Path, args, offset_mm: float) -> dict:

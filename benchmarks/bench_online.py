@@ -177,8 +177,9 @@ def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
     mean = {name: round(float(np.mean(e)), 4) for name, e in errors.items()}
     after = np.array(after, bool)
     mean_after = {name: round(float(np.mean(np.array(e)[after])), 4) for name, e in errors.items()} if after.any() else None
-    lat = result.latency_ms
+    lat = result.filter_ms
     track_ms = result.tracking_ms_per_frame
+    total = result.latency_ms
     motion = [np.linalg.norm(centroid(truth[f], pixel) - true0) for f in truth if f >= max(train)]
     return {"twin": twin.name, "particles": int(len(reduced.tissue_mm)), "horizon_frames": ahead,
             "horizon_ms": round(1000 * ahead * dt, 1), "construction_s": round(result.construction_s, 1),
@@ -187,13 +188,16 @@ def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
             "centroid_error_mean_after_the_change_mm": mean_after,
             "filter_latency_ms": {"median": round(float(np.median(lat)), 2), "p99": round(float(np.percentile(lat, 99)), 2)},
             "tracking_ms_per_frame": round(track_ms, 2),
+            "latency_with_tracking_ms": {"median": round(float(np.median(total)), 2),
+                                         "p99": round(float(np.percentile(total, 99)), 2)},
             "scale_at_end": round(float(result.scale[-1]), 3),
             "true_change_factor": _twin_settings(twin)["protocol"].get("change_factor"),
             "targets": {"centroid_0.1mm": mean["filter"] <= 0.1,
                         "half_of_hold_kalman_offline": all(mean["filter"] <= 0.5 * mean[b]
                                                            for b in ("hold", "kalman", "offline")),
-                        "median_25ms_p99_50ms_with_tracking": bool(np.median(lat) + track_ms <= 25
-                                                                   and np.percentile(lat, 99) + track_ms <= 50)}}
+                        # each frame's own latency, from the frame in memory to its aims
+                        "median_25ms_p99_50ms_with_tracking": bool(np.median(total) <= 25
+                                                                   and np.percentile(total, 99) <= 50)}}
 
 
 def reference_sensitivity(twin: Path, particles: int, scales=(1.0, 2.0)) -> dict:

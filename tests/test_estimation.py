@@ -344,9 +344,50 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     shutil.copytree(folder / "observed", other)
     frame0 = sorted((other / "frames").glob("*.png"))[0]
     shutil.copyfile(sorted((other / "frames").glob("*.png"))[1], frame0)
+    (other / "frames.nii.gz").unlink()           # else the folder itself is refused: its NIfTI disagrees
     wrong = subprocess.run(cli + ["online", str(cal), str(other), "-o", str(tmp_path / "y")], capture_output=True,
                            text=True)
     assert wrong.returncode == 2 and "frame 0" in wrong.stderr + wrong.stdout and not (tmp_path / "y").exists()
+    # --watch: a scanner writes the frames one by one (each in two halves, as a slow writer
+    # would), the loop takes each as soon as it is whole and prints its aims at once; what it
+    # computes is what the recorded replay computed, frame for frame
+    scanner = tmp_path / "scanner"
+    scanner.mkdir()
+    for name in ("setup.json", "initial_contour.csv"):
+        shutil.copyfile(folder / "observed" / name, scanner / name)
+    (scanner / "frames").mkdir()
+    recorded = sorted((folder / "observed" / "frames").glob("frame_*.png"))
+
+    def write_frames():
+        import time
+
+        for path in recorded:
+            data = path.read_bytes()
+            target = scanner / "frames" / path.name
+            with open(target, "wb") as fh:
+                fh.write(data[: len(data) // 2])
+                fh.flush()
+                time.sleep(0.01)
+                fh.write(data[len(data) // 2:])
+            time.sleep(0.02)
+
+    import threading
+
+    writer = threading.Thread(target=write_frames)
+    watched = tmp_path / "watched"
+    proc = subprocess.Popen(cli + ["online", str(cal), str(scanner), "-o", str(watched), "--horizons", "1,2",
+                                   "--watch", "--timeout", "3", "--stream"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    writer.start()
+    stdout, stderr = proc.communicate(timeout=600)
+    writer.join()
+    assert proc.returncode == 0, stderr
+    lines = [json.loads(line) for line in stdout.splitlines()]
+    assert [line["frame"] for line in lines] == list(range(1, 40)) and set(lines[0]["aim_mm"]) == {"1", "2"}
+    replay = np.genfromtxt(live / "online.csv", delimiter=",", names=True)
+    watch_rows = np.genfromtxt(watched / "online.csv", delimiter=",", names=True)
+    for column in ("predicted_x_mm", "predicted_y_mm", "tracked_x_mm", "push_scale"):
+        assert np.array_equal(replay[column], watch_rows[column], equal_nan=True), column
 
 
 def test_the_displacement_objective_is_the_weighted_difference_of_the_points_motion():

@@ -276,3 +276,42 @@ def test_rest_sweep_is_the_twins_sweep_without_its_physics(small_twin):
     assert min(dice(a, b) for a, b in zip(rs.masks[big], twin.sweep_masks[big])) > 0.9
     assert rs.volume_mm3 == pytest.approx(twin.parameters["facts"]["blob_volume_mm3"])
     assert rs.start == int(np.argmin(np.abs(twin.observed.sweep_z_mm - twin.observed.setup.imaging.frames_plane_z_mm)))
+
+
+def test_observed_nifti_must_hold_what_the_pngs_hold(twin, tmp_path):
+    """frames.nii.gz and sweep.nii.gz beside the PNGs are the same images on the same grid, or
+    the folder is refused (track once read the NIfTI, calibrate the PNGs); without them the
+    PNGs alone are read."""
+    import shutil
+
+    import SimpleITK as sitk
+
+    from hifumotion.io.writers import write_nifti
+    from hifumotion.observed import load_observed
+
+    folder, result = twin
+    copy = tmp_path / "observed"
+    shutil.copytree(folder / "observed", copy)
+    cine = copy / "frames.nii.gz"
+    image = sitk.ReadImage(str(cine))
+    assert image.GetSize()[-1] == len(result.frames) and image.GetSpacing()[-1] == pytest.approx(
+        1 / result.config.imaging.frame_rate_hz)
+    px = result.config.imaging.pixel_mm
+    interval = 1 / result.config.imaging.frame_rate_hz
+    edited = result.frames.copy()
+    edited[3] = 255 - edited[3]                                # one frame of the NIfTI changed
+    write_nifti(cine, edited, (px, px), frame_interval_s=interval)
+    with pytest.raises(InputError, match="image 3 differs from frames/"):
+        load_observed(copy)
+    write_nifti(cine, result.frames, (px, px), frame_interval_s=2 * interval)   # another frame rate
+    with pytest.raises(InputError, match="frame_interval_s"):
+        load_observed(copy)
+    write_nifti(cine, result.frames[:-1], (px, px), frame_interval_s=interval)
+    with pytest.raises(InputError, match="shape"):
+        load_observed(copy)
+    cine.unlink()
+    write_nifti(copy / "sweep.nii.gz", result.sweep, (2 * px, 2 * px), slice_positions_mm=result.probe.sweep_z_mm)
+    with pytest.raises(InputError, match="pixel_mm"):
+        load_observed(copy)
+    (copy / "sweep.nii.gz").unlink()
+    assert np.array_equal(load_observed(copy).frames, result.frames)

@@ -388,6 +388,10 @@ CASES = [
     (["info", "orientation3"], "ImageOrientationPatient"),
     (["reconstruct", "orientation3", "-o", "out"], "ImageOrientationPatient"),
     (["info", "instance_x"], "InstanceNumber"),
+    # the online loop: a recorded cine paced, or frames watched for — not both; a wait of no time
+    (["online", "ph", "ph", "-o", "out", "--watch", "--pace"], "--pace"),
+    (["online", "ph", "ph", "-o", "out", "--watch", "--timeout", "0"], "--timeout"),
+    (["online", "ph", "ph", "-o", "out", "--watch", "--timeout", "nan"], "--timeout"),
 ]
 
 

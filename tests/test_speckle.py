@@ -112,6 +112,32 @@ def test_the_bar_never_carries_tissue_displacement(scatterers):
     assert series.rigid_shift_mm[-1] / PX == pytest.approx([0.0, -30.0], abs=0.2)
 
 
+def test_frames_fed_one_by_one_are_tracked_as_the_whole_cine(scatterers):
+    """The online loop's tracker (a frame at a time, from frames ≤ t) gives the batch tracking's
+    fields exactly — with the bar, and with new reference frames started along the way — and
+    the same bar path."""
+    from hifumotion.speckle import SpeckleTracker
+
+    rows, cols = np.mgrid[0:SHAPE[0], 0:SHAPE[1]]
+    bar = (rows >= 90) & (cols >= 40) & (cols < 88)
+    # the scatterers jittered a little more each frame, so the speckle decorrelates from frame 0
+    rng = np.random.default_rng(3)
+    start = scatterers.positions_mm
+    frames = []
+    for t, s in enumerate(np.linspace(0.0, 20.0, 9)):
+        scene = Scatterers(start + rng.normal(0.0, 0.012 * t, start.shape), scatterers.amplitudes)
+        frames.append(_bar_scene(scene, s))
+    frames = np.stack(frames)
+    series = displacement(frames, PX, rigid=bar, keyframe_quality=0.9)
+    tracker = SpeckleTracker(frames[0], PX, rigid=bar, keyframe_quality=0.9)
+    for t in range(1, len(frames)):
+        field_mm, quality = tracker.update(frames[t])
+        assert np.array_equal(field_mm, series.displacement_mm[t], equal_nan=True), t
+        assert np.array_equal(quality, series.quality[t]), t
+        assert np.array_equal(tracker.rigid_shift_mm, series.rigid_shift_mm[t]), t
+    assert tracker.key > 0                       # the references did change
+
+
 def test_a_disc_moved_along_a_known_path_is_followed(scatterers):
     """An echogenic disc in water, carried along a quarter circle of 2 mm radius: the followed
     contour's centroid stays within 0.15 mm of the true path at every frame."""

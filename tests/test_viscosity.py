@@ -73,3 +73,25 @@ def test_implicit_matches_explicit_when_the_step_is_small():
         results.append(system.v.copy())
     explicit, implicit = results
     assert np.abs(implicit - explicit).max() < 0.02 * np.abs(explicit).max()
+
+
+def test_eq16_law_floors_the_rate_and_caps_mu():
+    """Eq. 16's μ = β1 γ̇^β2 with its two regularisations, on rates chosen by hand."""
+    from hifumotion.rheology import viscosity_pa_s
+
+    rates = np.array([[0.0, 0.01], [4.0, 1e12]])
+    mu = viscosity_pa_s(rates, beta1=3.0, beta2=0.5, rate_floor_per_s=0.04, mu_max_pa_s=1e5)
+    # below the floor: β1 √0.04 = 0.6; 4 1/s: 3·2 = 6; 10¹² 1/s: 3·10⁶ capped at 10⁵
+    np.testing.assert_allclose(mu, [[0.6, 0.6], [6.0, 1e5]], rtol=1e-12)
+    # a general exponent (not the √ fast path): 3 · 8^(1/3) = 6
+    np.testing.assert_allclose(viscosity_pa_s([8.0], 3.0, 1 / 3, 0.04, 1e5), [6.0], rtol=1e-12)
+
+
+def test_pair_rate_is_the_relative_velocity_across_the_pair():
+    """Eq. 16's pair rate |v_ij × r_ij| / |r_ij|²: sliding past at 2 mm/s across 1 mm is 2 1/s,
+    moving along the pair is no shear at all (the floor)."""
+    from hifumotion.particles.viscosity import rheological_mu
+
+    across = rheological_mu(0.002, 0.0, 0.0, 0.0, 0.001, 0.0, 0.001, 1.0, 1.0, 1e7, 1e-6)
+    along = rheological_mu(0.0, 0.002, 0.0, 0.0, 0.001, 0.0, 0.001, 1.0, 1.0, 1e7, 1e-6)
+    assert abs(across - 2.0) < 1e-9 and abs(along - 1e-6) < 1e-15

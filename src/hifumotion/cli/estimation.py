@@ -139,52 +139,89 @@ def predict(
 @app.command()
 def online(
     calibration_dir: Path = typer.Argument(..., help="A folder written by hifumotion calibrate."),
-    observed_dir: Path = typer.Argument(..., help="The observed experiment whose cine is replayed frame by frame (setup.json, frames/, initial_contour.csv)."),
+    observed_dir: Path = typer.Argument(..., help="The experiment: setup.json, initial_contour.csv and frames/frame_NNNN.png (recorded, or being written with --watch)."),
     output: Path = typer.Option(..., "--output", "-o", help="New folder for online.csv, online.json, online.png."),
     horizons: str = typer.Option("4,6,8", "--horizons", help="How far ahead to aim, in frames: '4,6,8' (at 20 frames/s: 200–400 ms)."),
     boundary_offset: float = typer.Option(0.0, "--boundary-offset", min=-5.0, max=5.0, help="As given to hifumotion calibrate (mm)."),
+    watch: bool = typer.Option(False, "--watch", help="Take the frames as a scanner writes them into OBSERVED_DIR/frames/, each as soon as it is whole; stop when none has come for --timeout seconds."),
+    timeout: float = typer.Option(10.0, "--timeout", min=0.01, max=86400.0, help="--watch: seconds to wait for the next frame before stopping."),
+    pace: bool = typer.Option(False, "--pace", help="Replay a recorded cine at its frame rate (each frame handed over when it would have arrived), not as fast as it can be read."),
+    stream: bool = typer.Option(False, "--stream", help="Print each frame's aims as one JSON line on standard output the moment they exist."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
-    """Replay a cine frame by frame: track it, correct the reduced model and the push's size with each frame, aim t + k ahead."""
+    """Run the online loop: each frame tracked, the reduced model and the push's size corrected by it, the aim for t + k written before the next frame."""
+    import json
+    import sys
+    import time
+
     from hifumotion.console import StageBars
-    from hifumotion.estimation.prepare import prepare
-    from hifumotion.estimation.store import load_calibration
+    from hifumotion.estimation.store import frame0_fingerprint, load_calibration
     from hifumotion.io import output_folder, write_json
     from hifumotion.io.files import write_text
-    from hifumotion.estimation.store import frame0_fingerprint
-    from hifumotion.observed import load_observed
-    from hifumotion.prediction.online import online_loop
+    from hifumotion.observed import load_observed, read_initial_contour, read_setup
+    from hifumotion.prediction.online import OnlineSession, watch_frames
     from hifumotion.report.figures import online_figure
     from hifumotion.run_info import RunRecord
 
+    if watch and pace:
+        raise InputError("--pace replays a recorded cine; --watch takes frames as they are written: give one", "--pace")
     spec, k, reference, meta = load_calibration(calibration_dir)
-    observed = load_observed(observed_dir)
-    n = len(observed.frames)
-    if tuple(observed.frames.shape[1:]) != tuple(reference.plane.shape):
-        raise InputError(f"its frames are {observed.frames.shape[1:]} pixels, the calibration's "
-                         f"{tuple(reference.plane.shape)}: not the experiment that was calibrated", observed_dir)
+    if not (observed_dir / "setup.json").is_file():
+        raise InputError("not an observed experiment folder (no setup.json)", observed_dir)
+    setup = read_setup(observed_dir / "setup.json")
     try:
         ahead = sorted({int(h) for h in horizons.split(",") if h.strip()})
     except ValueError:
         raise InputError(f"expected whole frames separated by commas, got {horizons!r}", "--horizons") from None
-    if not ahead or ahead[0] < 1 or ahead[-1] >= n:
-        raise InputError(f"expected horizons from 1 to {n - 1} frames, got {horizons!r}", "--horizons")
-    if meta.get("observed_frame0_sha256") not in (None, frame0_fingerprint(observed.frames)):
+    if not ahead or ahead[0] < 1 or ahead[-1] >= setup.frames:
+        raise InputError(f"expected horizons from 1 to {setup.frames - 1} frames, got {horizons!r}", "--horizons")
+    if tuple(setup.imaging.image_shape) != tuple(reference.plane.shape):
+        raise InputError(f"its frames are {tuple(setup.imaging.image_shape)} pixels, the calibration's "
+                         f"{tuple(reference.plane.shape)}: not the experiment that was calibrated", observed_dir / "setup.json")
+    if abs(setup.frame_interval_s - spec.frame_interval_s) > 1e-9 * spec.frame_interval_s:
+        raise InputError(f"the cine's frame interval ({setup.frame_interval_s} s) is not the calibration's "
+                         f"({spec.frame_interval_s} s)", observed_dir / "setup.json")
+    initial = read_initial_contour(observed_dir, setup)
+    if setup.initial_contour_frame != 0:
+        raise InputError("the initial contour must be on frame 0 for the online loop", observed_dir / "initial_contour.csv")
+    if watch:
+        arriving = watch_frames(observed_dir / "frames", first=0, timeout_s=timeout)
+        first = next(arriving, None)
+        if first is None:
+            raise InputError(f"no frame_0000.png came within {timeout:g} s", observed_dir / "frames")
+        frame0 = first[1]
+        frames = (image for _, image in arriving)
+    else:
+        recorded = load_observed(observed_dir).frames
+        frame0, frames = recorded[0], iter(recorded[1:])
+    if tuple(frame0.shape) != tuple(setup.imaging.image_shape):
+        raise InputError(f"frame 0 has shape {frame0.shape}; setup.json's imaging.image_shape is "
+                         f"{tuple(setup.imaging.image_shape)}", observed_dir / "frames")
+    if meta.get("observed_frame0_sha256") not in (None, frame0_fingerprint(frame0[None])):
         raise InputError("its frame 0 is not the calibrated experiment's (parameters.json's "
                          "observed_frame0_sha256)", observed_dir)
-    if abs(observed.frame_interval_s - spec.frame_interval_s) > 1e-9 * spec.frame_interval_s:
-        raise InputError(f"the cine's frame interval ({observed.frame_interval_s} s) is not the calibration's "
-                         f"({spec.frame_interval_s} s)", observed_dir / "setup.json")
     record = RunRecord("online", config={"calibration": str(calibration_dir), "observed": str(observed_dir),
                                          "horizons_frames": ahead, "boundary_offset_mm": boundary_offset,
-                                         "parameters": k.as_dict()})
+                                         "watch": watch, "pace": pace, "parameters": k.as_dict()})
     with output_folder(output, overwrite, inputs=(calibration_dir, observed_dir)) as out:
         with StageBars() as progress:
-            with record.stage("track"):
-                observation = prepare(observed, None, progress=progress, boundary_offset_mm=boundary_offset,
-                                      tracking="speckle")
+            with record.stage("reduced model, frame 0"):
+                session = OnlineSession.start(spec, k, setup, frame0, initial, ahead,
+                                              boundary_offset_mm=boundary_offset, progress=progress)
             with record.stage("online"):
-                result = online_loop(spec, k, observation, ahead, progress=progress)
+                due = time.perf_counter()
+                for frame in frames:
+                    if pace:            # hand the frame over when the scanner would have
+                        due += setup.frame_interval_s
+                        time.sleep(max(0.0, due - time.perf_counter()))
+                    step = session.push(frame)
+                    if stream:
+                        sys.stdout.write(json.dumps(step.as_dict()) + "\n")
+                        sys.stdout.flush()
+                    progress("online", min(step.frame / max(setup.frames - 1, 1), 1.0))
+        if not session.steps:
+            raise InputError("no frame after frame 0 to follow", observed_dir / "frames")
+        result = session.result()
         summary = result.summary()
         write_text(out / "online.csv", result.to_csv())
         write_json(out / "online.json", summary)
@@ -193,5 +230,6 @@ def online(
         record.write(out)
     lat = summary["latency_with_tracking_ms"]
     console.print(f"{summary['frames']} frames: {lat['median']:.1f} ms a frame at the median, {lat['p99']:.1f} ms at "
-                  f"the 99th percentile (tracking included); push at {summary['push_scale_last']:.2f} × the "
-                  f"calibrated one at the end; online.csv and online.png in {output.resolve()}", highlight=False)
+                  f"the 99th percentile (tracking included), {summary['frames_late']} after the next frame was due; "
+                  f"push at {summary['push_scale_last']:.2f} × the calibrated one at the end; online.csv and "
+                  f"online.png in {output.resolve()}", highlight=False)

@@ -76,18 +76,22 @@ def track(
         raise InputError(f"unknown estimator {estimator!r}; expected one of {', '.join(ESTIMATORS)}", "--estimator")
     cine = source
     if source.is_dir() and (source / "setup.json").is_file():      # an observed/ folder
-        cine = source / "frames.nii.gz" if (source / "frames.nii.gz").is_file() else source / "frames"
+        # read as calibrate reads it (frames/ by number, frames.nii.gz checked against them,
+        # setup.json's pixel size and frame interval), so both follow the same images
+        from hifumotion.observed import load_observed
+        from hifumotion.sequence import ImageSequence
+
+        observed = load_observed(source)
+        cine = source / "frames"
         setup = setup or source / "setup.json"
         init = init or source / "initial_contour.csv"
-        if spacing is None or frame_interval is None:
-            from hifumotion.observed.setup import read_setup
-
-            s = read_setup(setup)
-            spacing = spacing or str(s.imaging.pixel_mm)
-            frame_interval = frame_interval or s.frame_interval_s
-    if init is None:
+        seq = ImageSequence.from_array(observed.frames, spacing_mm=parse_spacing(spacing) or observed.pixel_mm,
+                                       frame_interval_s=frame_interval or observed.frame_interval_s,
+                                       source=str(cine), value_range=(0.0, 255.0))
+    elif init is None:
         raise InputError("give frame 0's initial contour with --init (or track an observed/ folder)", "--init")
-    seq = read_sequence(cine, parse_spacing(spacing), frame_interval)
+    else:
+        seq = read_sequence(cine, parse_spacing(spacing), frame_interval)
     if seq.n_frames < 2:
         raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
     if not seq.spacing_known:

@@ -47,6 +47,7 @@ from hifumotion.creep.reduce import reduced_matrix_data
 from hifumotion.creep.settings import CreepSettings
 from hifumotion.creep.voxels import VoxelMesh
 from hifumotion.errors import InputError
+from hifumotion.rheology import MU_MAX_PA_S, RATE_FLOOR_PER_S, viscosity_pa_s
 
 MM = 1e-3
 #: how far (spacings) a node released within a step must cross a surface to touch again in it
@@ -65,8 +66,8 @@ class CreepMaterial:
     beta1: float = 1.0
     beta2: float = 0.5
     density_kg_m3: float = 1050.0
-    rate_floor_per_s: float = 1e-3
-    mu_max_pa_s: float = 1e7
+    rate_floor_per_s: float = RATE_FLOOR_PER_S
+    mu_max_pa_s: float = MU_MAX_PA_S
 
     def lame(self) -> tuple[float, float]:
         """(λ, G) in Pa."""
@@ -79,8 +80,7 @@ class CreepMaterial:
 
     def viscosity(self, rate_per_s: np.ndarray) -> np.ndarray:
         """Eq. 16's μ = β1 max(γ̇, floor)^β2 (Pa·s), capped at ``mu_max_pa_s``."""
-        rate = np.maximum(rate_per_s, self.rate_floor_per_s)
-        return np.minimum(self.beta1 * rate ** self.beta2, self.mu_max_pa_s)
+        return viscosity_pa_s(rate_per_s, self.beta1, self.beta2, self.rate_floor_per_s, self.mu_max_pa_s)
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ import time
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Literal
+from typing import Callable
 
 import numpy as np
 
@@ -39,54 +39,16 @@ from hifumotion.estimation import fit as fitting
 from hifumotion.estimation.evaluator import Evaluator
 from hifumotion.estimation.iterative import iterative_estimate
 from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, model_spec
+from hifumotion.estimation.settings import CalibrationSettings
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm
 from hifumotion.estimation.prepare import Observation
-from hifumotion.estimation.protocol import default_frames
+from hifumotion.estimation.protocol import default_frames, parse_frames
 from hifumotion.estimation.space import NAMES, STEPS, SearchSpace
 
-Method = Literal["least_squares", "cmaes", "table1"]
 OBJECTIVES = ("auto", "contour", "contour+displacement")
 #: Largest space-mapping move per coordinate, in units of 10 finite-difference steps
 #: (ln E, ln β1 by 1.0: a factor 2.7; ν by 0.2; β2 by 1.0).
 MAX_MAPPING_STEP = 2.0
-
-
-@dataclass
-class CalibrationSettings:
-    """How to calibrate (every field has a default; see :func:`calibrate`)."""
-
-    method: Method = "least_squares"
-    training_frames: list[int] | None = None       # default: the paper's protocol (protocol.default_frames)
-    force_n: float = 0.25                           # nominal force (N): only F/E is determined
-    search_particles: int = 1000                    # tissue particles of the search model
-    # the search model's integrator (ModelSettings.integrator): "reduced", the search model's
-    # POD–Galerkin model made around the design's centre and again around the first optimum
-    # (docs/decisions.md, issue 39); "implicit", its full runs
-    search_integrator: str = "implicit"
-    # with the reduced search: one run of the full final model at the fit, its residual recorded
-    # beside the reduced model's
-    full_model_check: bool = True
-    model: ModelSettings = field(default_factory=ModelSettings)
-    max_evaluations: int = 8                        # least squares: function evaluations
-    cma_generations: int = 12
-    threshold_mm_per_point: float | None = None     # Table 1's T per contour point (default one pixel)
-    table1_max_runs: int = 120
-    space_mapping: bool = True
-    mapping_runs: int = 3                           # runs of the final model in the mapping (each verified)
-    degeneracy_check: bool = True
-    workers: int | None = None
-    scheduler_address: str | None = None
-    seed: int = 0
-    # "contour": the distances of the model's points to the observed contours (the paper's S_t);
-    # "contour+displacement": also the speckle-tracked displacement of those points; "auto":
-    # the displacement too where speckle tracking observed the motion (docs/decisions.md)
-    objective: str = "auto"
-    # weight each contour residual by the speckle tracking's quality at the point (with speckle
-    # tracking; given or GLCV-tracked contours have no such measure and keep weight 1)
-    quality_weights: bool = True
-    # also fit the bar's tracked displacement (objective.TrainingData.with_bar), where the
-    # speckle tracking followed a bar
-    bar_motion: bool = True
 
 
 @dataclass
@@ -147,7 +109,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     tell = progress or (lambda stage, fraction: None)
     timings: dict[str, float] = {}
     n_frames = len(observation.frame_masks)
-    frames = s.training_frames or default_frames(n_frames)[0]
+    frames = parse_frames(s.training_frames, n_frames, "training_frames") or default_frames(n_frames)[0]
     data = TrainingData.from_masks(observation.frame_masks, frames, observation.frame_plane)
     space = SearchSpace(force_n=s.force_n)
 

@@ -21,17 +21,20 @@ def default_frames(n_frames: int) -> tuple[list[int], list[int]]:
     return train, [v for v in valid if v < n_frames]
 
 
-def parse_frames(text: str | None, n_frames: int, what: str) -> list[int] | None:
-    """``"20,30,40"`` or ``"20:101:10"`` (start:stop[:step]) → frame numbers; None passes through.
+def parse_frames(text: str | list[int] | None, n_frames: int, what: str) -> list[int] | None:
+    """``"20,30,40"`` or ``"20:101:10"`` (start:stop[:step]), or a list of frame numbers →
+    sorted frame numbers; None passes through.
 
     The frames must lie in 1 … ``n_frames`` − 1; a range is checked by its ends before any
     list is made (``1:150000000`` is refused at once, not after allocating it).
     """
     if text is None:
         return None
-    expected = f"expected frame numbers like '20,30,40' or '20:101:10', got {text[:40]!r}"
+    expected = f"expected frame numbers like '20,30,40' or '20:101:10', got {str(text)[:40]!r}"
     try:
-        if ":" in text:
+        if not isinstance(text, str):
+            frames = [int(p) for p in text]
+        elif ":" in text:
             parts = [int(p) for p in text.split(":")]
             if len(parts) not in (2, 3):
                 raise ValueError

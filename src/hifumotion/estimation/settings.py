@@ -1,6 +1,9 @@
-"""The fitted model's numerical settings, as plain data (no solver imported).
+"""How to calibrate and the fitted model's numerical settings, as plain data (no solver imported).
 
-:class:`ModelSettings` holds every setting of a forward run that is not fitted: the
+:class:`CalibrationSettings` holds every setting of :func:`~hifumotion.estimation.calibrate.calibrate`
+— the run configuration's ``[estimation]`` is one (:class:`~hifumotion.workflow.pipeline.EstimationConfig`
+adds only what the pipeline around the calibration needs), so a setting has one name, one
+default and one check. :class:`ModelSettings` holds every setting of a forward run that is not fitted: the
 resolution, the integrator and each integrator's own settings (the fast path's
 :class:`~hifumotion.creep.settings.CreepSettings`, its reduced model's
 :class:`~hifumotion.creep.settings.ReducedSettings`, the explicit path's fields). A run's
@@ -13,12 +16,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
+from pydantic import Field, field_validator, model_validator
+
 import numpy as np
 from annotated_types import Ge, Gt, Le
 
 from hifumotion import paper
+from hifumotion.config import ConfigModel
 from hifumotion.creep.settings import CreepSettings, ReducedSettings
 from hifumotion.errors import InputError
+from hifumotion.rheology import RATE_FLOOR_PER_S
 
 #: The forward models (``estimation.model.FORWARD_MODELS``), by ``ModelSettings.integrator``.
 INTEGRATORS = ("implicit", "explicit", "reduced")
@@ -36,7 +43,7 @@ class ModelSettings:
     max_step_s: Annotated[float, Gt(0)] = 5e-3         # largest time step (s)
     force_ramp_s: Annotated[float, Ge(0)] | None = None  # the force's linear rise (s); default: setup.json's push.ramp_s
     tissue_density_kg_m3: Annotated[float, Gt(0)] = 1050.0
-    rate_floor_per_s: Annotated[float, Gt(0)] = 0.02   # floor of the shear rate in Eq. 16's μ (1/s); a regularisation, not fitted
+    rate_floor_per_s: Annotated[float, Gt(0)] = RATE_FLOOR_PER_S   # floor of the shear rate in Eq. 16's μ (1/s; hifumotion.rheology)
     contour_points: Annotated[int, Ge(8), Le(10_000)] = 64   # size of the point set A
     integrator: Literal["implicit", "explicit", "reduced"] = "implicit"  # one of INTEGRATORS: "implicit", the fast path (hifumotion.creep);
                                         # "explicit", Eq. 8–20 as the paper; "reduced", the fast path's
@@ -66,4 +73,64 @@ class ModelSettings:
         self.reduced_span = span
 
 
-__all__ = ["INTEGRATORS", "ModelSettings"]
+class CalibrationSettings(ConfigModel):
+    """How to calibrate (:func:`~hifumotion.estimation.calibrate.calibrate`); every field has a default."""
+
+    method: Literal["least_squares", "cmaes", "table1"] = Field(
+        "least_squares", description="estimator: bounded least squares, CMA-ES, or the paper's Table 1 algorithm")
+    training_frames: str | list[int] | None = Field(
+        None, description="training frames, '20,30,40', '20:101:10' or a list (default: the paper's protocol scaled to the series)")
+    force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
+    search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
+    search_integrator: Literal["implicit", "reduced"] = Field(
+        "implicit", description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre, again around its best start, then the final model's own around the search's optimum; docs/decisions.md, issue 39)")
+    full_model_check: bool = Field(
+        True, description="with the reduced search: one run of the full final model at the fit, its residual recorded beside the reduced model's")
+    max_evaluations: int = Field(8, ge=1, le=10_000, description="least squares: residual evaluations (each with a Jacobian)")
+    cma_generations: int = Field(12, ge=1, le=10_000, description="CMA-ES: generations")
+    threshold_mm_per_point: float | None = Field(
+        None, gt=0, description="Table 1's threshold T per contour point in mm (default: one pixel)")
+    table1_max_runs: int = Field(120, ge=1, le=100_000, description="Table 1: most forward runs")
+    space_mapping: bool = Field(True, description="implicit search: map the search model's fit to the final model (output space mapping)")
+    mapping_runs: int = Field(3, ge=1, le=100, description="runs of the final model in the space mapping (each verified)")
+    degeneracy_check: bool = Field(True, description="run and report the F–E–β1 scaling the push cannot see")
+    objective: Literal["auto", "contour", "contour+displacement"] = Field(
+        "auto", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points; auto: the displacement too where speckle tracking observed it")
+    quality_weights: bool = Field(
+        True, description="weight each contour point's residual by the speckle tracking's quality there (speckle tracking only): a boundary the image does not show (under the bar's blur, on the floor) counts for little")
+    bar_motion: bool = Field(
+        True, description="also fit the bar's tracked displacement (speckle tracking with a bar in setup.json): under a force-controlled push the bar's travel is what F/E sets most directly")
+    workers: int | None = Field(None, ge=1, le=1024, description="Dask worker processes of the local cluster (default: the cores)")
+    scheduler_address: str | None = Field(None, description="an existing Dask cluster, tcp://host:8786")
+    seed: int = Field(0, ge=0, lt=2 ** 63, description="seed of the search's random draws (CMA-ES)")
+    model: ModelSettings = Field(
+        default_factory=ModelSettings, description="the fitted model's settings: its tissue particles (the paper: 4,399), integrator and each integrator's own (creep: the fast path's; reduced: its reduced model's); particles is short for model.tissue_particles")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _particles_are_the_models(cls, data):
+        # ``particles`` (the option's and earlier configurations' name) is the model's tissue
+        # particles: one setting, one home
+        if isinstance(data, dict) and "particles" in data:
+            data = dict(data)
+            model = data.get("model")
+            model = dict(model) if isinstance(model, dict) else ({} if model is None else model)
+            if isinstance(model, dict):
+                if "tissue_particles" in model:
+                    raise ValueError("particles and model.tissue_particles are one setting; give it once")
+                model["tissue_particles"] = data.pop("particles")
+                data["model"] = model
+        return data
+
+    @field_validator("scheduler_address")
+    @classmethod
+    def _an_address(cls, v):
+        from hifumotion.estimation.evaluator import scheduler_address_problem
+
+        problem = None if v is None else scheduler_address_problem(v)
+        if problem:
+            raise ValueError(problem)
+        return v
+
+
+__all__ = ["INTEGRATORS", "CalibrationSettings", "ModelSettings"]

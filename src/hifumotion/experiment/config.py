@@ -136,7 +136,7 @@ class TwinConfig(ConfigModel):
 
     seed: int = Field(0, ge=0, lt=2 ** 63, description="seed of every random draw (shape, speckle, clicks); a whole number ≥ 0")
     blob: BlobConfig = BlobConfig()
-    tissue: TissueMaterial = TissueMaterial(beta1=7e5, rate_floor_per_s=0.02)
+    tissue: TissueMaterial = TissueMaterial(beta1=7e5)
     bar: BarConfig = BarConfig(ramp_s=0.5, density_kg_m3=2700.0)
     tank: TankConfig = TankConfig(size_mm=(44.0, 40.0, 36.0), water_depth_mm=6.0)
     physics: PhysicsConfig = PhysicsConfig()

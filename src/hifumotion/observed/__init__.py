@@ -5,7 +5,7 @@ estimation (:mod:`hifumotion.estimation`, which reads it) owns this package; the
 path goes from a user's files through here to the fit without touching the twin.
 
 - :mod:`.setup` — :class:`Setup`, the typed, versioned ``setup.json``;
-- :mod:`.folder` — :class:`Observed`, :func:`load_observed`, :func:`write_observed`;
+- :mod:`.folder` — :class:`Observed`, :func:`load_observed`, :func:`read_initial_contour`, :func:`write_observed`;
 - :mod:`.boundary` — :func:`shift_boundary`, a segmentation's boundary moved by the
   imaging system's measured offset.
 """
@@ -14,6 +14,7 @@ from hifumotion._lazy import lazy_exports
 
 # names → their modules, imported on first use (the folder's reader pulls the image stack)
 _WHERE = {"shift_boundary": "boundary", "Observed": "folder", "load_observed": "folder", "write_observed": "folder",
+          "read_initial_contour": "folder",
           "SCHEMA_VERSION": "setup", "BarSetup": "setup", "ImagingGeometry": "setup", "PushSchedule": "setup",
           "Setup": "setup", "TankSetup": "setup", "read_setup": "setup", "write_setup": "setup"}
 

@@ -11,6 +11,11 @@ estimation through :func:`load_observed`. Layout (lengths in mm, times in s)::
     frames/frame_NNNN.png  the imaging plane's time series during the push
     frames.nii.gz          the same as 2D+t
     initial_contour.csv    the clinician's clicked contour (frame, point, x_px, y_px, x_mm, y_mm)
+
+The PNGs are what every command reads; a NIfTI beside them (for 3D Slicer) must hold the same
+images on the same grid, or the folder is refused: two versions of one series that disagree
+would leave which one a result came from to chance (``track`` and ``calibrate`` once read one
+each).
 """
 
 from __future__ import annotations
@@ -111,7 +116,6 @@ def _stack(folder: Path, prefix: str, shape: tuple[int, int]) -> np.ndarray:
 def load_observed(folder: str | Path) -> Observed:
     """Read ``folder`` (module docstring); a missing or malformed part is one clear error."""
     from hifumotion.io.files import require_regular_file
-    from hifumotion.io.writers import read_contours_csv
 
     root = Path(folder)
     if not root.is_dir():
@@ -125,6 +129,8 @@ def load_observed(folder: str | Path) -> Observed:
     frames = _stack(root / "frames", "frame_", shape)
     if len(frames) != setup.frames:
         raise InputError(f"{len(frames)} frame images; setup.json says frames = {setup.frames}", root / "frames")
+    _same_as_pngs(root / "frames.nii.gz", frames, "frames/", setup.pixel_mm, spacing_t=setup.frame_interval_s,
+                  what_t="setup.json's frame_interval_s", unit_t="s", stepped_dimension=4)
     pos_path = require_regular_file(root / "sweep_positions.csv", "sweep_positions.csv")
     with open(pos_path, newline="", encoding="utf-8") as fh:
         try:
@@ -135,12 +141,60 @@ def load_observed(folder: str | Path) -> Observed:
         raise InputError(f"{len(z)} positions for {len(sweep)} sweep images", pos_path)
     if not np.all(np.isfinite(z)) or (len(z) > 1 and not np.all(np.diff(z) > 0)):
         raise InputError("the planes' z_mm must be finite and increasing", pos_path)
-    contours = read_contours_csv(root / "initial_contour.csv", spacing_mm=setup.pixel_mm)
+    steps = np.diff(z)
+    even = len(z) > 1 and np.allclose(steps, steps[0], rtol=1e-3, atol=1e-6)
+    _same_as_pngs(root / "sweep.nii.gz", sweep, "sweep/", setup.pixel_mm,
+                  spacing_t=float(steps[0]) if even else None, what_t="sweep_positions.csv's spacing", unit_t="mm", stepped_dimension=3)
+    return Observed(sweep, z, frames, read_initial_contour(root, setup), setup)
+
+
+def read_initial_contour(folder: str | Path, setup: Setup) -> Contour:
+    """The clinician's contour of ``setup.initial_contour_frame`` from ``folder/initial_contour.csv``."""
+    from hifumotion.io.writers import read_contours_csv
+
+    path = Path(folder) / "initial_contour.csv"
+    contours = read_contours_csv(path, spacing_mm=setup.pixel_mm)
     wanted = [c for label, c in contours.items() if _frame_label(label) == setup.initial_contour_frame]
     if not wanted:
         raise InputError(f"no contour of frame {setup.initial_contour_frame} (setup.json's initial_contour_frame)",
-                         root / "initial_contour.csv")
-    return Observed(sweep, z, frames, wanted[0], setup)
+                         path)
+    return wanted[0]
+
+
+def _same_as_pngs(path: Path, stack: np.ndarray, pngs: str, pixel_mm: float, spacing_t: float | None,
+                  what_t: str, unit_t: str, stepped_dimension: int) -> None:
+    """A NIfTI ``path`` beside the PNG ``stack`` holds the same images on the same grid
+    (module docstring); absent, nothing to check. The step between images (``spacing_t``,
+    in ``unit_t``) is compared where the volume records one: an image of ``stepped_dimension``
+    dimensions (a cine written as 2D+t has four, its last the frame interval)."""
+    if not path.exists() and not path.is_symlink():
+        return
+    import SimpleITK as sitk
+
+    from hifumotion.io.files import require_regular_file
+
+    require_regular_file(path, "NIfTI volume")
+    try:
+        image = sitk.ReadImage(str(path))
+    except RuntimeError:
+        raise InputError(f"not a readable NIfTI volume (it should hold the images of {pngs})", path) from None
+    volume = sitk.GetArrayViewFromImage(image)
+    volume = volume.reshape((-1,) + volume.shape[-2:]) if volume.ndim >= 2 else volume
+    if volume.shape != stack.shape:
+        raise InputError(f"holds images of shape {tuple(volume.shape)}; {pngs} holds {tuple(stack.shape)} "
+                         "(remove one, or write both again)", path)
+    differ = np.flatnonzero(np.any(volume.reshape(len(stack), -1) != stack.reshape(len(stack), -1), axis=1))
+    if differ.size:
+        raise InputError(f"image {differ[0]} differs from {pngs}'s ({differ.size} of {len(stack)} differ; "
+                         "remove one, or write both again)", path)
+    spacing = image.GetSpacing()
+    if not np.allclose(spacing[:2], pixel_mm, rtol=1e-3):
+        raise InputError(f"pixel size {spacing[0]:.6g} × {spacing[1]:.6g} mm; setup.json's imaging.pixel_mm "
+                         f"is {pixel_mm:.6g}", path)
+    if spacing_t is not None and len(stack) > 1 and image.GetDimension() == stepped_dimension:
+        step = spacing[-1]
+        if not np.isclose(step, spacing_t, rtol=1e-3):
+            raise InputError(f"spacing {step:.6g} {unit_t} between images; {what_t} is {spacing_t:.6g} {unit_t}", path)
 
 
 def _frame_label(label: str) -> int | None:
@@ -176,4 +230,4 @@ def write_observed(folder: str | Path, setup: Setup, sweep: np.ndarray, sweep_z_
     return folder
 
 
-__all__ = ["Observed", "load_observed", "write_observed"]
+__all__ = ["Observed", "load_observed", "read_initial_contour", "write_observed"]

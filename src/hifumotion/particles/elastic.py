@@ -53,6 +53,7 @@ from numba import njit, prange
 from scipy.spatial import cKDTree
 
 from hifumotion.particles.viscosity import rheological_mu
+from hifumotion.rheology import MU_MAX_PA_S, RATE_FLOOR_PER_S
 from hifumotion import paper
 
 
@@ -73,7 +74,7 @@ class TissueParameters:
     mu_max_pa_s
         Cap on the rheological viscosity (Pa·s), where a small |r_ij| would blow it up.
     rate_floor_per_s
-        Floor of the shear rate (1/s) in μ (matters only for β₂ < 0).
+        Floor of the shear rate (1/s) in μ (:mod:`hifumotion.rheology`).
     hourglass
         α of the hourglass control (dimensionless, 0 switches it off).
     corotated
@@ -93,8 +94,8 @@ class TissueParameters:
     volume_stiffness_pa: float = 0.0
     beta1: float = paper.BETA1
     beta2: float = paper.BETA2
-    mu_max_pa_s: float = 1e7
-    rate_floor_per_s: float = 1e-3
+    mu_max_pa_s: float = MU_MAX_PA_S
+    rate_floor_per_s: float = RATE_FLOOR_PER_S
     hourglass: float = 1.0
     corotated: bool = False
     moment_floor: float = 1e-4

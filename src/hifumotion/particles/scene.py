@@ -35,6 +35,7 @@ from pydantic import Field, field_validator, model_validator
 from hifumotion.config import ConfigModel
 from hifumotion.errors import InputError
 from hifumotion.resources import MAX_FRAMES, check_memory
+from hifumotion.rheology import RATE_FLOOR_PER_S
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.rigid import piecewise_linear_schedule
 from hifumotion.particles.solver import SolverSettings
@@ -67,7 +68,7 @@ class TissueMaterial(ConfigModel):
     poisson_ratio: float = Field(paper.POISSON_RATIO, gt=-1, lt=0.5, description="Poisson's ratio (Table 3: 0.47)")
     beta1: float = Field(paper.BETA1, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
     beta2: float = Field(paper.BETA2, description="rheological viscosity exponent β2 (Table 3: 0.5)")
-    rate_floor_per_s: float = Field(1e-3, gt=0, description="floor of the shear rate in the rheological viscosity μ = β1 max(rate, floor)^β2, in 1/s")
+    rate_floor_per_s: float = Field(RATE_FLOOR_PER_S, gt=0, description="floor of the shear rate in the rheological viscosity μ = β1 max(rate, floor)^β2, in 1/s")
     volume_stiffness_pa: float = Field(0.0, ge=0, description="k_v of the volume-conservation force (Eq. 15–16) in Pa")
     hourglass: float = Field(1.0, ge=0, description="hourglass control α (0: off)")
     corotated: bool = Field(False, description="corotated linear elasticity instead of Saint-Venant–Kirchhoff")

@@ -29,18 +29,21 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from hifumotion import rheology
+
+#: Eq. 16's law (:mod:`hifumotion.rheology`), compiled into the pair kernels
+_viscosity_pa_s = njit(inline="always", fastmath=True, error_model="numpy")(rheology.viscosity_pa_s)
+
 
 @njit(inline="always", fastmath=True, error_model="numpy")
 def rheological_mu(v0, v1, v2, r0, r1, r2, r, beta1, beta2, mu_max, rate_floor):
-    """Eq. 16's μ = β₁ (|v_ij × r_ij| / |r_ij|²)^β₂ (Pa·s), rate floored, μ capped."""
+    """Eq. 16's μ (Pa·s, :func:`hifumotion.rheology.viscosity_pa_s`) at the pair's shear rate
+    ``|v_ij × r_ij| / |r_ij|²``."""
     c0 = v1 * r2 - v2 * r1
     c1 = v2 * r0 - v0 * r2
     c2 = v0 * r1 - v1 * r0
     rate = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2) / (r * r)
-    if rate < rate_floor:
-        rate = rate_floor
-    mu = beta1 * math.sqrt(rate) if beta2 == 0.5 else beta1 * math.exp(beta2 * math.log(rate))
-    return mu_max if mu > mu_max else mu
+    return _viscosity_pa_s(rate, beta1, beta2, rate_floor, mu_max)
 
 
 @njit(cache=True, parallel=True, fastmath=True, error_model="numpy")

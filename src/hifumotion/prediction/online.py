@@ -1,15 +1,21 @@
 """The online loop: frames in one at a time, the aim for t + k out before the next arrives.
 
-:func:`online_loop` runs a calibrated model alongside a tracked cine: at every frame t it
-hands the tracked displacement of the contour points A to the
-:class:`~hifumotion.prediction.assimilate.OnlineAssimilator` (the reduced model's state and
-the push's scale corrected), then predicts the section at t + k for each horizon k: the
-frame-0 contour moved by the predicted displacement of its points, and its centroid —
-the aim. Each frame's wall time (the filter and the predictions) is kept.
+:class:`OnlineSession` runs a calibrated model beside a scanner. It is made from what is known
+before the push (the calibration, ``setup.json``, frame 0 and its target), then takes each
+frame as it arrives (:meth:`OnlineSession.push`):
 
-The tracking is speckle tracking's (:mod:`hifumotion.speckle`), which is causal — frame t's
-displacement is computed from frames ≤ t — so a cine replayed here sees what a scanner
-feeding frames would; its own cost per frame is measured beside the loop's.
+1. **track**: speckle tracking registers the frame to frame 0 (:class:`~hifumotion.speckle.SpeckleTracker`,
+   from frames ≤ t only) — the displacement of the contour points A and of the target's
+   material boundary;
+2. **assimilate**: the :class:`~hifumotion.prediction.assimilate.OnlineAssimilator` corrects
+   the reduced model's state and the push's scale with the points' tracked displacement;
+3. **aim**: for each horizon k the section at t + k — the frame-0 section moved as the
+   polygon of the points A — and its centroid, the aim.
+
+Each frame's wall time, from the frame in memory to its aims, is its latency (tracking
+included). :func:`online_loop` replays a recorded cine through a session; ``hifumotion
+online`` replays one, at its frame rate if asked, or watches a folder a scanner writes into
+(:func:`watch_frames`).
 """
 
 from __future__ import annotations
@@ -39,9 +45,13 @@ class OnlineResult:
     scale, scale_std
         The push's estimated scale (force over the calibrated schedule) after each frame.
     latency_ms
-        The loop's wall time at each frame (assimilation and every horizon's prediction).
-    tracking_ms_per_frame
-        Speckle tracking's wall time per frame.
+        Each frame's wall time from the frame in memory to its aims (tracking, assimilation
+        and every horizon's prediction).
+    construction_s
+        The reduced model's construction before the first frame (s).
+    tracking_ms, filter_ms
+        The parts of each frame's latency: speckle tracking, and the filter's step (with the
+        predictions).
     """
 
     frames: np.ndarray
@@ -51,9 +61,15 @@ class OnlineResult:
     scale: np.ndarray
     scale_std: np.ndarray
     latency_ms: np.ndarray
-    tracking_ms_per_frame: float
     construction_s: float
+    tracking_ms: np.ndarray
+    filter_ms: np.ndarray
     stats: dict = field(default_factory=dict)
+
+    @property
+    def tracking_ms_per_frame(self) -> float:
+        """Speckle tracking's mean wall time a frame (ms)."""
+        return float(np.mean(self.tracking_ms)) if len(self.tracking_ms) else float("nan")
 
     def _actual(self, truth_mm: np.ndarray | None) -> np.ndarray:
         """The tracked centroids, or the true ones' motion re-anchored on the tracked frame 0 (the
@@ -83,15 +99,17 @@ class OnlineResult:
         return out
 
     def summary(self) -> dict:
-        """Latency (median, 99th percentile, with tracking), the push's last scale and, per
-        horizon, the mean error against the tracked section beside holding still."""
-        lat = self.latency_ms
+        """Latency (median, 99th percentile, tracking included; the frames whose aims came after
+        the next frame was due), the push's last scale and, per horizon, the mean error against
+        the tracked section beside holding still."""
+        lat, filt = self.latency_ms, self.filter_ms
+        deadline_ms = 1000.0 * self.frame_interval_s
         out = {"frames": int(len(self.frames)), "frame_interval_s": self.frame_interval_s,
-               "latency_ms": {"median": float(np.median(lat)), "p99": float(np.percentile(lat, 99)),
-                              "max": float(lat.max())},
+               "latency_with_tracking_ms": {"median": float(np.median(lat)), "p99": float(np.percentile(lat, 99)),
+                                            "max": float(lat.max())},
+               "filter_ms": {"median": float(np.median(filt)), "p99": float(np.percentile(filt, 99))},
                "tracking_ms_per_frame": self.tracking_ms_per_frame,
-               "latency_with_tracking_ms": {"median": float(np.median(lat)) + self.tracking_ms_per_frame,
-                                            "p99": float(np.percentile(lat, 99)) + self.tracking_ms_per_frame},
+               "frames_late": int(np.sum(lat > deadline_ms)),
                "push_scale_last": float(self.scale[-1]), "push_scale_std_last": float(self.scale_std[-1]),
                "reduced_model_construction_s": self.construction_s, "horizons": {}}
         for k in self.predicted_mm:
@@ -107,7 +125,7 @@ class OnlineResult:
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(["frame", "time_s", "horizon_frames", "horizon_ms", "target_frame", "predicted_x_mm",
                     "predicted_y_mm", "tracked_x_mm", "tracked_y_mm", "error_mm", "push_scale", "push_scale_std",
-                    "latency_ms"])
+                    "latency_ms", "tracking_ms", "filter_ms"])
         dt = self.frame_interval_s
         for i, t in enumerate(self.frames):
             for k in sorted(self.predicted_mm):
@@ -119,66 +137,231 @@ class OnlineResult:
                     row += [f"{o[0]:.4f}", f"{o[1]:.4f}", f"{np.hypot(*(p - o)):.4f}"]
                 else:
                     row += ["", "", ""]
-                row += [f"{self.scale[i]:.5f}", f"{self.scale_std[i]:.5f}", f"{self.latency_ms[i]:.3f}"]
+                row += [f"{self.scale[i]:.5f}", f"{self.scale_std[i]:.5f}", f"{self.latency_ms[i]:.3f}",
+                        f"{self.tracking_ms[i]:.3f}", f"{self.filter_ms[i]:.3f}"]
                 w.writerow(row)
         return buf.getvalue()
 
 
-def online_loop(spec, k, observation, horizons_frames, settings=None, progress=None) -> OnlineResult:
-    """Run the calibrated model ``spec`` at ``k`` alongside the tracked ``observation`` frame by
-    frame (module docstring); predictions ``horizons_frames`` frames ahead.
+@dataclass
+class OnlineStep:
+    """What :meth:`OnlineSession.push` returns for frame t (mm in the image plane: x along its
+    columns, y along its rows).
 
-    ``spec`` runs on its reduced model (made here, around ``k``, if it is not yet: two full
-    runs); ``observation`` is a :class:`~hifumotion.estimation.prepare.Observation` tracked by
-    speckle (its displacement series carries the points A).
+    ``predicted_mm``: horizon k (frames) → the predicted section centroid at t + k (the aim);
+    ``tracked_mm``: the tracked section's centroid at t; ``scale``/``scale_std``: the push's
+    estimated scale; ``tracking_ms``/``filter_ms``/``latency_ms``: the frame's wall times
+    (the latency from the frame in memory to its aims, tracking included)."""
+
+    frame: int
+    time_s: float
+    predicted_mm: dict
+    tracked_mm: np.ndarray
+    scale: float
+    scale_std: float
+    tracking_ms: float
+    filter_ms: float
+    latency_ms: float
+
+    def as_dict(self) -> dict:
+        """A JSON-ready record (``hifumotion online --stream`` prints one a line)."""
+        return {"frame": self.frame, "time_s": round(self.time_s, 6),
+                "aim_mm": {str(k): [round(float(v), 4) for v in p] for k, p in self.predicted_mm.items()},
+                "tracked_mm": [round(float(v), 4) for v in self.tracked_mm],
+                "push_scale": round(self.scale, 5), "push_scale_std": round(self.scale_std, 5),
+                "latency_ms": round(self.latency_ms, 3)}
+
+
+class OnlineSession:
+    """The online loop fed one frame at a time (module docstring).
+
+    Parameters
+    ----------
+    spec, k
+        The calibrated model (:class:`~hifumotion.estimation.model.ModelSpec`) and its
+        parameters; it runs on its reduced model (made here around ``k`` when ``spec`` is not
+        reduced yet: two full runs, before the first frame).
+    setup
+        What the operator knows (:class:`~hifumotion.observed.setup.Setup`): the imaging plane,
+        the pixel size, the frame interval, the floor and the bar.
+    frame0
+        ``(H, W)`` frame 0, uint8 or grey levels in [0, 1].
+    mask0
+        ``(H, W)`` bool: the target on frame 0 (its segmentation, the boundary offset applied).
+    horizons_frames
+        How far ahead to aim, in frames (each ≥ 1).
+    frames_expected
+        How long the push is expected to last, in frames (the reduced model's runs span it);
+        default ``setup.frames``. Frames past it are still taken.
+    settings
+        The filter's (:class:`~hifumotion.prediction.assimilate.AssimilationSettings`).
     """
-    import time
 
-    from hifumotion.creep.scene import scene_material
-    from hifumotion.estimation.model import scene_for
-    from hifumotion.prediction.assimilate import OnlineAssimilator, points_observation
+    def __init__(self, spec, k, setup, frame0: np.ndarray, mask0: np.ndarray, horizons_frames, *,
+                 frames_expected: int | None = None, settings=None, progress=None):
+        import time
 
-    tell = progress or (lambda stage, fraction: None)
-    horizons = sorted({int(h) for h in horizons_frames})
-    if not horizons or horizons[0] < 1:
-        raise InputError(f"horizons must be whole frames ≥ 1, got {horizons_frames}", "horizons")
-    if observation.motion is None:
-        raise InputError("the online loop reads the speckle tracking's displacement; track with speckle", "tracking")
-    n = len(observation.frame_masks)
-    last = n - 1
-    dt = float(spec.frame_interval_s)
-    t0 = time.perf_counter()
-    model = spec.reduced(k, last, progress=lambda f: tell("reduced model", f))
-    construction_s = time.perf_counter() - t0
-    scene = scene_for(spec, k, last)
-    plane = observation.frame_plane
-    axes = np.stack([np.asarray(plane.u, float), np.asarray(plane.v, float)])
-    h = points_observation(model, spec.points_mm, axes, spec.spacing_mm)
-    filt = OnlineAssimilator(model, scene_material(scene), scene.bar.schedule(), h, dt, settings)
-    series = observation.motion.displacement
-    px = plane.to_pixels(spec.points_mm)
-    from hifumotion.metrics import centroid
+        from hifumotion.contour import Contour
+        from hifumotion.creep.scene import scene_material
+        from hifumotion.estimation.model import scene_for
+        from hifumotion.metrics import centroid
+        from hifumotion.observed.solids import imaging_plane, known_solids
+        from hifumotion.prediction.assimilate import OnlineAssimilator, points_observation
+        from hifumotion.speckle import SpeckleTracker
 
-    a0 = spec.points_mm @ axes.T - np.asarray(plane.origin_mm, float) @ axes.T      # frame-0 points, image mm
-    pixel = float(observation.pixel_mm)
-    tracked = np.array([centroid(m, pixel) if m.any() else (np.nan, np.nan) for m in observation.frame_masks])
-    # the predicted section: the tracked frame-0 section moved as the polygon of the points A
-    base = tracked[0] - polygon_centroid(a0)
-    frames = np.arange(1, n)
-    predicted = {h_: np.full((len(frames), 2), np.nan) for h_ in horizons}
-    scale, scale_std, latency = (np.zeros(len(frames)) for _ in range(3))
-    for i, t in enumerate(frames):
-        d, q = series.at(px, int(t))
+        tell = progress or (lambda stage, fraction: None)
+        self.horizons = sorted({int(h) for h in horizons_frames})
+        if not self.horizons or self.horizons[0] < 1:
+            raise InputError(f"horizons must be whole frames ≥ 1, got {horizons_frames}", "horizons")
+        frame0 = np.asarray(frame0)
+        mask0 = np.asarray(mask0, bool)
+        if frame0.ndim != 2 or mask0.shape != frame0.shape:
+            raise InputError(f"expected frame 0 and its target mask of one shape (H, W), got {frame0.shape} "
+                             f"and {mask0.shape}", "frame0")
+        if not mask0.any():
+            raise InputError("frame 0's target mask is empty", "mask0")
+        self.dt = float(spec.frame_interval_s)
+        self.pixel_mm = float(setup.pixel_mm)
+        last = max(int(frames_expected or setup.frames) - 1, max(self.horizons) + 1)
+        t0 = time.perf_counter()
+        self.model = spec.reduced(k, last, progress=lambda f: tell("reduced model", f))
+        self.construction_s = time.perf_counter() - t0
+        scene = scene_for(spec, k, last)
+        plane = imaging_plane(setup)
+        axes = np.stack([np.asarray(plane.u, float), np.asarray(plane.v, float)])
+        h = points_observation(self.model, spec.points_mm, axes, spec.spacing_mm)
+        self.filter = OnlineAssimilator(self.model, scene_material(scene), scene.bar.schedule(), h, self.dt, settings)
+        solids = known_solids(plane, setup)
+        self.tracker = SpeckleTracker(frame0, self.pixel_mm, exclude=solids.floor, rigid=solids.bar)
+        self.shape = frame0.shape
+        self.points_px = plane.to_pixels(spec.points_mm)            # the model's points A on frame 0
+        self.a0 = spec.points_mm @ axes.T - np.asarray(plane.origin_mm, float) @ axes.T   # the same, image mm
+        # the target's material boundary on frame 0, carried as follow() carries it
+        self.contour0 = Contour.from_mask(mask0, self.pixel_mm)
+        self.boundary_px = self.contour0.resampled(1.0).points_px
+        self.tracked0 = np.asarray(centroid(mask0, self.pixel_mm), float)
+        # the predicted section: the tracked frame-0 section moved as the polygon of the points A
+        self.base = self.tracked0 - polygon_centroid(self.a0)
+        self.steps: list[OnlineStep] = []
+
+    @classmethod
+    def start(cls, spec, k, setup, frame0: np.ndarray, initial_contour, horizons_frames, *,
+              boundary_offset_mm: float = 0.0, **options) -> "OnlineSession":
+        """A session from what a scanner gives before the push: frame 0 and the clinician's
+        contour on it (``initial_contour``, anything :func:`~hifumotion.segmentation.segment`
+        takes). Frame 0's target is segmented as the calibration's tracking segments it (GLCV,
+        the known solids out, moved inwards by ``boundary_offset_mm``); ``options`` are the
+        constructor's."""
+        from hifumotion.observed.solids import check_bar_in_image, imaging_plane, known_solids
+        from hifumotion.speckle import segment_target
+        from hifumotion.speckle.displacement import unit_frames
+
+        frame0 = np.asarray(frame0)
+        if frame0.ndim != 2 or tuple(frame0.shape) != tuple(setup.imaging.image_shape):
+            raise InputError(f"frame 0 has shape {frame0.shape}; setup.json's imaging.image_shape is "
+                             f"{tuple(setup.imaging.image_shape)}", "frame0")
+        solids = known_solids(imaging_plane(setup), setup)
+        check_bar_in_image(frame0, solids, "setup.json")
+        first = segment_target(unit_frames(frame0[None])[0], initial_contour, setup.pixel_mm, solids=solids,
+                               boundary_offset_mm=boundary_offset_mm)
+        return cls(spec, k, setup, frame0, first.mask, horizons_frames, **options)
+
+    @property
+    def frame(self) -> int:
+        """The last frame taken (0 before the first :meth:`push`)."""
+        return len(self.steps)
+
+    def push(self, frame: np.ndarray) -> OnlineStep:
+        """Take the next frame (``(H, W)``, uint8 or [0, 1]): track it, assimilate it, aim ahead."""
+        import time
+
+        from hifumotion.contour import Contour
+        from hifumotion.metrics import centroid
+        from hifumotion.speckle import sample_field
+
+        started = time.perf_counter()
+        field_mm, quality = self.tracker.update(frame)
+        tracked_at = time.perf_counter()
+        d, q = sample_field(field_mm, quality, self.points_px)
         seen = np.isfinite(d).all(1) & (q > 0)
         y = np.where(seen[:, None], d, np.nan).ravel()
-        est = filt.assimilate(y, horizons, np.repeat(np.where(seen, q, 1.0), 2))
-        for h_ in horizons:
-            predicted[h_][i] = base + polygon_centroid(a0 + est.predicted_mm[h_].reshape(-1, 2))
-        scale[i], scale_std[i], latency[i] = est.scale, est.scale_std, est.latency_ms
-        tell("online", (i + 1) / len(frames))
-    track_ms = 1000.0 * float(observation.timings_s.get("track_s", np.nan)) / n
-    return OnlineResult(frames, dt, predicted, tracked, scale, scale_std, latency, track_ms, construction_s,
-                        dict(filt.stats))
+        est = self.filter.assimilate(y, self.horizons, np.repeat(np.where(seen, q, 1.0), 2))
+        predicted = {h: self.base + polygon_centroid(self.a0 + est.predicted_mm[h].reshape(-1, 2))
+                     for h in self.horizons}
+        aimed = time.perf_counter()
+        # the tracked section (for the record and the hold baseline: not on the aim's path)
+        moved, _ = sample_field(field_mm, quality, self.boundary_px)
+        row, col = self.tracker.spacing_mm
+        boundary = self.boundary_px + np.nan_to_num(moved, nan=0.0) / np.array([col, row])
+        mask = Contour(boundary, self.contour0.spacing_mm).to_mask(self.shape)
+        tracked = np.asarray(centroid(mask, self.pixel_mm), float) if mask.any() else np.full(2, np.nan)
+        t = len(self.steps) + 1
+        step = OnlineStep(t, t * self.dt, predicted, tracked, est.scale, est.scale_std,
+                          1000.0 * (tracked_at - started), est.latency_ms, 1000.0 * (aimed - started))
+        self.steps.append(step)
+        return step
+
+    def result(self) -> "OnlineResult":
+        """Every frame taken so far as an :class:`OnlineResult`."""
+        steps = self.steps
+        frames = np.array([s.frame for s in steps], int)
+        predicted = {h: np.array([s.predicted_mm[h] for s in steps]).reshape(-1, 2) for h in self.horizons}
+        tracked = np.vstack([self.tracked0[None]] + [s.tracked_mm[None] for s in steps])
+        return OnlineResult(frames, self.dt, predicted, tracked,
+                            np.array([s.scale for s in steps]), np.array([s.scale_std for s in steps]),
+                            np.array([s.latency_ms for s in steps]), self.construction_s,
+                            np.array([s.tracking_ms for s in steps]), np.array([s.filter_ms for s in steps]),
+                            dict(self.filter.stats))
 
 
-__all__ = ["OnlineResult", "online_loop", "polygon_centroid"]
+def online_loop(spec, k, observation, horizons_frames, settings=None, progress=None) -> OnlineResult:
+    """Replay the cine of ``observation`` (a :class:`~hifumotion.estimation.prepare.Observation`)
+    through an :class:`OnlineSession` of the calibrated model ``spec`` at ``k``, frame by frame
+    from frame 1, predicting ``horizons_frames`` frames ahead. The session tracks the frames
+    itself, as it would a scanner's; frame 0's target is the observation's."""
+    tell = progress or (lambda stage, fraction: None)
+    observed = observation.observed
+    frames = observed.frames
+    session = OnlineSession(spec, k, observed.setup, frames[0], observation.frame_masks[0], horizons_frames,
+                            frames_expected=len(frames), settings=settings, progress=tell)
+    for t in range(1, len(frames)):
+        session.push(frames[t])
+        tell("online", t / (len(frames) - 1))
+    return session.result()
+
+
+def watch_frames(folder, first: int = 1, prefix: str = "frame_", timeout_s: float = 10.0, poll_s: float = 0.002,
+                 stop=None):
+    """The frames a scanner writes into ``folder`` as ``PREFIXNNNN.png`` (numbered from 0), in
+    order from number ``first``, each yielded ``(number, (H, W) array)`` as soon as it can be
+    read. A file still being written (not yet a whole PNG) is read again until it is; the
+    watch ends when the next number has not appeared for ``timeout_s`` seconds, or when
+    ``stop()`` is true. A frame written out of turn (``frame_0012`` before ``frame_0011``)
+    waits for its turn."""
+    import time
+    from pathlib import Path
+
+    from hifumotion.io.raster import read_raster_array
+
+    root = Path(folder)
+    number = int(first)
+    waited_since = time.perf_counter()
+    while stop is None or not stop():
+        path = next((p for p in (root / f"{prefix}{number:04d}.png", root / f"{prefix}{number}.png") if p.is_file()),
+                    None)
+        if path is not None:
+            try:
+                image = read_raster_array(path)[0]
+            except InputError:
+                image = None                # not yet whole: the scanner is still writing it
+            if image is not None:
+                yield number, image
+                number += 1
+                waited_since = time.perf_counter()
+                continue
+        if time.perf_counter() - waited_since > timeout_s:
+            return
+        time.sleep(poll_s)
+
+
+__all__ = ["OnlineResult", "OnlineSession", "OnlineStep", "online_loop", "polygon_centroid", "watch_frames"]

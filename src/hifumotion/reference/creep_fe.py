@@ -43,6 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from hifumotion.errors import InputError
+from hifumotion.rheology import MU_MAX_PA_S
 from hifumotion.reference._p2 import MM, P2Mesh, p2_mesh
 
 FLOOR, BAR = 0, 1
@@ -74,7 +75,7 @@ class CreepingTissue:
     gravity_m_s2: float = 9.80665
     floor_friction: float = 0.5
     bar_friction: float = 0.5
-    mu_max_pa_s: float = 1e7
+    mu_max_pa_s: float = MU_MAX_PA_S
     max_volume_mm3: float = 2.0
 
 
@@ -218,7 +219,9 @@ class _Solver:
 
     def viscosity(self, rate: np.ndarray) -> np.ndarray:
         p = self.problem
-        return np.minimum(p.beta1 * np.maximum(rate, p.rate_floor_per_s) ** p.beta2, p.mu_max_pa_s)
+        from hifumotion.rheology import viscosity_pa_s
+
+        return viscosity_pa_s(rate, p.beta1, p.beta2, p.rate_floor_per_s, p.mu_max_pa_s)
 
     # -- one constrained solve ----------------------------------------------------------
     def reduction(self):

@@ -6,9 +6,9 @@
   in a narrow band (:mod:`.follow`).
 """
 
-from hifumotion.speckle.displacement import DisplacementSeries, displacement, local_ncc
+from hifumotion.speckle.displacement import DisplacementSeries, SpeckleTracker, displacement, local_ncc, sample_field
 from hifumotion.speckle._speckle_size import speckle_fwhm_px
 from hifumotion.speckle.follow import FollowResult, carry_contour, follow, segment_target
 
-__all__ = ["DisplacementSeries", "FollowResult", "carry_contour", "displacement", "follow", "local_ncc", "segment_target",
-           "speckle_fwhm_px"]
+__all__ = ["DisplacementSeries", "FollowResult", "SpeckleTracker", "carry_contour", "displacement", "follow",
+           "local_ncc", "sample_field", "segment_target", "speckle_fwhm_px"]

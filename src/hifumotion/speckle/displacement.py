@@ -55,6 +55,24 @@ def _remap_mask(mask: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.nd
                      borderValue=0).astype(bool)
 
 
+def sample_field(displacement_mm: np.ndarray, quality: np.ndarray, points_px: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Displacement (mm, ``(N, 2)``) and quality ``(N,)`` of frame-0 material points
+    ``points_px`` (``(N, 2)`` px, (x, y)) from one frame's field ``displacement_mm`` ``(H, W, 2)``
+    and ``quality`` ``(H, W)``: bilinear, from the valid pixels nearest each point (a point on
+    an excluded pixel takes its valid neighbours'; NaN and quality 0 where none is near)."""
+    pts = np.asarray(points_px, np.float32).reshape(-1, 2)
+    u = np.nan_to_num(displacement_mm, nan=0.0)
+    valid = np.isfinite(displacement_mm[..., 0]).astype(np.float32)
+    mx, my = pts[:, 0].reshape(1, -1), pts[:, 1].reshape(1, -1)
+    w = _remap(valid, mx, my).ravel()
+    du = _remap(u * valid[..., None], mx, my).reshape(-1, 2)
+    q = _remap(quality * valid, mx, my).ravel()
+    safe = np.maximum(w, 1e-6)[:, None]
+    disp = np.where(w[:, None] > 1e-6, du / safe, np.nan)
+    return disp.astype(np.float32), np.where(w > 1e-6, q / safe[:, 0], 0.0).astype(np.float32)
+
+
 def local_ncc(a: np.ndarray, b: np.ndarray, window_px: int = QUALITY_WINDOW_PX) -> np.ndarray:
     """Normalised cross-correlation of ``a`` and ``b`` in a ``window_px`` box around each pixel, in [−1, 1]."""
     import cv2
@@ -134,18 +152,8 @@ class DisplacementSeries:
 
     def at(self, points_px: np.ndarray, frame: int) -> tuple[np.ndarray, np.ndarray]:
         """Displacement (mm, ``(N, 2)``) and quality ``(N,)`` of frame-0 material points
-        ``points_px`` (``(N, 2)`` px, (x, y)) at ``frame``: bilinear, from the valid pixels
-        nearest each point (a point on an excluded pixel takes its valid neighbours')."""
-        pts = np.asarray(points_px, np.float32).reshape(-1, 2)
-        u = np.nan_to_num(self.displacement_mm[frame], nan=0.0)
-        valid = np.isfinite(self.displacement_mm[frame, ..., 0]).astype(np.float32)
-        mx, my = pts[:, 0].reshape(1, -1), pts[:, 1].reshape(1, -1)
-        w = _remap(valid, mx, my).ravel()
-        du = _remap(u * valid[..., None], mx, my).reshape(-1, 2)
-        q = _remap(self.quality[frame] * valid, mx, my).ravel()
-        safe = np.maximum(w, 1e-6)[:, None]
-        disp = np.where(w[:, None] > 1e-6, du / safe, np.nan)
-        return disp.astype(np.float32), np.where(w > 1e-6, q / safe[:, 0], 0.0).astype(np.float32)
+        ``points_px`` (``(N, 2)`` px, (x, y)) at ``frame`` (:func:`sample_field`)."""
+        return sample_field(self.displacement_mm[frame], self.quality[frame], points_px)
 
     def strain(self, frame: int) -> np.ndarray:
         """Small-strain tensor components ``(H, W, 3)`` = (ε_xx, ε_yy, ε_xy) of frame ``frame``
@@ -289,6 +297,166 @@ class RigidTracker:
         return found
 
 
+class SpeckleTracker:
+    """Speckle tracking one frame at a time: what :func:`displacement` runs over a cine, for
+    frames that arrive from a scanner (:mod:`hifumotion.prediction.online`).
+
+    Made from frame 0 (the speckle's size, the grey levels, the solids' bloom are measured
+    on it); each :meth:`update` takes the next frame and returns the displacement of frame
+    0's material points to it and its quality — frame t's estimate is computed from frames
+    ≤ t only, so a cine tracked at once and frames fed one by one give the same fields.
+    The parameters are :func:`displacement`'s. Frames are grey levels in [0, 1] or uint8.
+    """
+
+    def __init__(self, frame0: np.ndarray, spacing_mm, *, exclude: np.ndarray | None = None,
+                 rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
+                 keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane", lk_iterations: int = 1,
+                 lk_window: float = LK_WINDOW):
+        import cv2
+
+        from hifumotion.observed.solids import measure_bloom_px
+        from hifumotion.speckle._speckle_size import speckle_fwhm_px
+
+        frame0 = unit_frames(np.asarray(frame0)[None])[0]
+        self.spacing_mm = as_spacing_mm(spacing_mm)
+        h, w = frame0.shape
+        self.shape = (h, w)
+        given = {}
+        for name, m in (("exclude", exclude), ("rigid", rigid)):
+            if m is not None:
+                m = np.asarray(m, bool)
+                if m.shape != (h, w):
+                    raise InputError(f"expected a mask of shape {(h, w)}, got {m.shape}", name)
+                given[name] = m if m.any() else None
+        exclude, rigid = given.get("exclude"), given.get("rigid")
+        static = exclude if exclude is not None else np.zeros((h, w), bool)
+        self.rigid = rigid
+        self.solid0 = static | (rigid if rigid is not None else False)
+        if fill not in ("plane", "mean"):
+            raise InputError(f"unknown fill {fill!r}; expected plane or mean", "fill")
+        self.estimator = estimator.lower()
+        self.flow = flow_estimator(estimator)
+        if (~self.solid0).sum() < 64:
+            raise InputError("the known solids cover (almost) the whole image: no tissue left to track", "exclude")
+        self.smoothing, self.keyframe_quality, self.fill = smoothing, keyframe_quality, fill
+        self.lk_iterations = lk_iterations
+        # the speckle's size and the grey levels, measured on frame 0 away from the solids
+        solid0 = self.solid0
+        bright = (frame0 > np.percentile(frame0[~solid0], 50)) & ~solid0
+        fwhm = speckle_fwhm_px(frame0, bright if bright.sum() > 64 else None)
+        self.sigma = (smoothing * fwhm[0] / 2.355, smoothing * fwhm[1] / 2.355)
+        self.lk_sigma = (lk_window * fwhm[0] / 2.355, lk_window * fwhm[1] / 2.355)
+        tissue_level = float(np.median(frame0[bright])) if bright.any() else 1.0
+        background = float(np.median(frame0[~bright & ~solid0])) if (~bright & ~solid0).any() else 0.0
+        self.element = None
+        if rigid is not None:
+            bloom = measure_bloom_px(frame0, rigid, 0.5 * (tissue_level + background), fwhm)
+            if max(bloom) > 0:
+                self.element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * bloom[1] + 1, 2 * bloom[0] + 1))
+        self.rigid_tracker = RigidTracker(frame0, rigid) if rigid is not None else None
+        self.grown_static = _grow(static, self.element) if static.any() else static   # it does not move
+        self.gx, self.gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+        self.frames_seen = 1
+        self.key = 0                                       # the reference frame
+        self.covered_key, _ = self._solids_at(np.zeros(2))  # the solids (and their bloom) in the reference
+        self.reference = frame0
+        self.reference_u8 = _u8(frame0)
+        self.u_key = np.zeros((h, w, 2), np.float32)       # frame 0 → reference (frame-0 grid, px)
+        self.v = np.zeros((h, w, 2), np.float32)           # reference → current (reference grid, px)
+        self.textured = None                               # frame-0 pixels with speckle to track (set at frame 1)
+        self.lk = None                                     # the Lucas–Kanade refinement against the reference
+        self.tissue_key = None                             # the same pixels on the reference's grid
+        self.rigid_shift_px = np.zeros(2, np.float32)
+
+    def _solids_at(self, shift: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The solids grown by their blur in a frame, and the rigid one alone."""
+        bar = _grow(_shifted(self.rigid, shift), self.element) if self.rigid is not None else None
+        return (self.grown_static | bar if bar is not None else self.grown_static), bar
+
+    def update(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The next frame: ``(displacement_mm (H, W, 2), quality (H, W))`` of frame 0's
+        material points (NaN displacement and quality 0 on the solids of frame 0)."""
+        import cv2
+
+        from hifumotion.speckle._fill import normalized_convolution
+
+        frame = np.asarray(frame)
+        if frame.shape != self.shape:
+            raise InputError(f"expected a frame of shape {self.shape}, got {frame.shape}", "frame")
+        frame = unit_frames(frame[None])[0]
+        gx, gy, v = self.gx, self.gy, self.v
+        shift = self.rigid_tracker.update(frame) if self.rigid_tracker is not None else np.zeros(2, np.float32)
+        covered, bar_now = self._solids_at(shift)
+        current = _u8(frame)
+        any_solid = covered.any() or self.covered_key.any()
+        if any_solid:
+            # where a solid is (now, or was in the reference) frame t shows the reference moved
+            # by the estimate so far: those pixels agree with it, and no solid's motion reaches
+            # the tissue through the estimator's window
+            back_x, back_y = gx - v[..., 0], gy - v[..., 1]
+            replace = covered | (_remap_mask(self.covered_key, back_x, back_y))
+            moved = cv2.remap(self.reference_u8, back_x, back_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            current = np.where(replace, moved, current)
+        # register frame t directly to the reference, starting from the previous estimate
+        v = self.flow(self.reference_u8, current, v)
+        if self.lk_iterations > 0:
+            # Farnebäck's polynomial model of the speckle leaves a bias where the tissue is
+            # strained; Gauss–Newton on the speckle itself removes most of it
+            if self.lk is None:
+                self.lk = LucasKanade(self.reference, self.lk_sigma)
+            moving = current.astype(np.float32) * np.float32(1.0 / 255.0)
+            for _ in range(self.lk_iterations):
+                v = self.lk.refine(moving, v, gx, gy)
+        ahead_x, ahead_y = gx + v[..., 0], gy + v[..., 1]
+        weight = np.clip(local_ncc(self.reference, _remap(frame, ahead_x, ahead_y)), 0.0, 1.0)
+        weight *= weight
+        if any_solid:   # the material now under a solid, and the reference's own solids
+            weight[_remap_mask(covered, ahead_x, ahead_y) | self.covered_key] = 0.0
+        if self.smoothing > 0:
+            v = normalized_convolution(v, weight, self.sigma)
+            if self.fill == "plane" and self.rigid is not None and self.tissue_key is not None:
+                # tissue under the bar carries on the visible tissue's gradient (the push's
+                # compression), not only its mean: a plane fitted around the gap
+                v = _fill_gap(v, weight, bar_now, self.tissue_key, 4.0 * max(self.sigma))
+        # back on frame 0's grid
+        if self.key == 0:
+            out = v
+            quality = np.sqrt(weight)
+        else:
+            mx, my = gx + self.u_key[..., 0], gy + self.u_key[..., 1]
+            out = self.u_key + _remap(v, mx, my)
+            quality = np.sqrt(np.clip(_remap(weight, mx, my), 0.0, 1.0))
+        self.v = v
+        self.rigid_shift_px = np.asarray(shift, np.float32)
+        t = self.frames_seen
+        self.frames_seen += 1
+        if self.textured is None:
+            self.textured = (quality > 0.5) & ~self.solid0
+            self.tissue_key = self.textured
+        if (self.keyframe_quality > 0 and self.textured.any()
+                and np.median(quality[self.textured]) < self.keyframe_quality):
+            # a new reference: the speckle has decorrelated from the old one
+            self.key, self.u_key, self.v = t, out.copy(), np.zeros_like(v)
+            # frame 0's tissue pixels seen from the new reference (X ≈ Y − u(Y))
+            self.tissue_key = _remap_mask(self.textured, gx - self.u_key[..., 0], gy - self.u_key[..., 1])
+            self.covered_key, self.reference, self.reference_u8 = covered, frame, _u8(frame)
+            self.lk = None
+        row, col = self.spacing_mm
+        disp = out * np.array([col, row], np.float32)
+        disp[self.solid0] = np.nan
+        quality = quality.astype(np.float32, copy=False)
+        quality[self.solid0] = 0.0
+        return disp, quality
+
+    @property
+    def rigid_shift_mm(self) -> np.ndarray | None:
+        """The rigid solid's translation (x, y) from frame 0 in mm at the last frame; None without one."""
+        if self.rigid is None:
+            return None
+        row, col = self.spacing_mm
+        return self.rigid_shift_px * np.array([col, row], np.float32)
+
+
 def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | None = None,
                  rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
                  keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane", lk_iterations: int = 1,
@@ -351,71 +519,22 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     elasticity imaging using short-time correlation. IEEE TUFFC 46(1), 1999. — Knutsson H,
     Westin C-F. Normalized and differential convolution. CVPR 1993.
     """
-    import cv2
-
-    from hifumotion.observed.solids import measure_bloom_px
     from hifumotion.sequence import ImageSequence
-    from hifumotion.speckle._fill import normalized_convolution
-    from hifumotion.speckle._speckle_size import speckle_fwhm_px
 
     if isinstance(frames, ImageSequence):
         spacing_mm = spacing_mm if spacing_mm is not None else frames.spacing_mm
         frames = frames.frames
     frames = unit_frames(frames)
-    spacing = as_spacing_mm(spacing_mm)
+    tracker = SpeckleTracker(frames[0], spacing_mm, exclude=exclude, rigid=rigid, estimator=estimator,
+                             smoothing=smoothing, keyframe_quality=keyframe_quality, fill=fill,
+                             lk_iterations=lk_iterations, lk_window=lk_window)
     t_count, h, w = frames.shape
-    given = {}
-    for name, m in (("exclude", exclude), ("rigid", rigid)):
-        if m is not None:
-            m = np.asarray(m, bool)
-            if m.shape != (h, w):
-                raise InputError(f"expected a mask of shape {(h, w)}, got {m.shape}", name)
-            given[name] = m if m.any() else None
-    exclude, rigid = given.get("exclude"), given.get("rigid")
-    static = exclude if exclude is not None else np.zeros((h, w), bool)
-    solid0 = static | (rigid if rigid is not None else False)
-    if fill not in ("plane", "mean"):
-        raise InputError(f"unknown fill {fill!r}; expected plane or mean", "fill")
-    flow = flow_estimator(estimator)
-    if (~solid0).sum() < 64:
-        raise InputError("the known solids cover (almost) the whole image: no tissue left to track", "exclude")
-    # the speckle's size and the grey levels, measured on frame 0 away from the solids
-    bright = (frames[0] > np.percentile(frames[0][~solid0], 50)) & ~solid0
-    fwhm = speckle_fwhm_px(frames[0], bright if bright.sum() > 64 else None)
-    sigma = (smoothing * fwhm[0] / 2.355, smoothing * fwhm[1] / 2.355)
-    tissue_level = float(np.median(frames[0][bright])) if bright.any() else 1.0
-    background = float(np.median(frames[0][~bright & ~solid0])) if (~bright & ~solid0).any() else 0.0
-    element = None
-    if rigid is not None:
-        bloom = measure_bloom_px(frames[0], rigid, 0.5 * (tissue_level + background), fwhm)
-        if max(bloom) > 0:
-            element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * bloom[1] + 1, 2 * bloom[0] + 1))
-    tracker = RigidTracker(frames[0], rigid) if rigid is not None else None
-
-    grown_static = _grow(static, element) if static.any() else static   # it does not move
-
-    def solids_at(shift: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """The solids grown by their blur in a frame, and the rigid one alone."""
-        bar = _grow(_shifted(rigid, shift), element) if rigid is not None else None
-        return (grown_static | bar if bar is not None else grown_static), bar
-
-    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     out = np.zeros((t_count, h, w, 2), np.float32)
     quality = np.zeros((t_count, h, w), np.float32)
-    quality[0] = np.where(solid0, 0.0, 1.0)
+    out[0, tracker.solid0] = np.nan
+    quality[0] = np.where(tracker.solid0, 0.0, 1.0)
     seconds = np.zeros(t_count)
     rigid_path = np.zeros((t_count, 2), np.float32)
-    key = 0                                    # the reference frame
-    covered_key, _ = solids_at(np.zeros(2))    # the solids (and their bloom) in the reference
-    frames_u8 = _u8(frames)                    # what the flow reads, converted once
-    reference = frames[0]
-    reference_u8 = frames_u8[0]
-    u_key = np.zeros((h, w, 2), np.float32)    # frame 0 → reference (frame-0 grid)
-    v = np.zeros((h, w, 2), np.float32)        # reference → current (reference grid)
-    textured = None                            # frame-0 pixels with speckle to track (set at frame 1)
-    lk = None                                  # the Lucas–Kanade refinement against the reference
-    lk_sigma = (lk_window * fwhm[0] / 2.355, lk_window * fwhm[1] / 2.355)
-    tissue_key = None                          # the same pixels on the reference's grid
     steps = range(1, t_count)
     if progress:
         from hifumotion.console import track as progress_bar
@@ -423,65 +542,12 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         steps = progress_bar(steps, "speckle tracking", total=t_count - 1)
     for t in steps:
         t0 = time.perf_counter()
-        shift = tracker.update(frames[t]) if tracker is not None else np.zeros(2, np.float32)
-        covered, bar_now = solids_at(shift)
-        current = frames_u8[t]
-        any_solid = covered.any() or covered_key.any()
-        if any_solid:
-            # where a solid is (now, or was in the reference) frame t shows the reference moved
-            # by the estimate so far: those pixels agree with it, and no solid's motion reaches
-            # the tissue through the estimator's window
-            back_x, back_y = gx - v[..., 0], gy - v[..., 1]
-            replace = covered | (_remap_mask(covered_key, back_x, back_y))
-            moved = cv2.remap(reference_u8, back_x, back_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            current = np.where(replace, moved, current)
-        # register frame t directly to the reference, starting from the previous estimate
-        v = flow(reference_u8, current, v)
-        if lk_iterations > 0:
-            # Farnebäck's polynomial model of the speckle leaves a bias where the tissue is
-            # strained; Gauss–Newton on the speckle itself removes most of it
-            if lk is None:
-                lk = LucasKanade(reference, lk_sigma)
-            moving = current.astype(np.float32) * np.float32(1.0 / 255.0)
-            for _ in range(lk_iterations):
-                v = lk.refine(moving, v, gx, gy)
-        ahead_x, ahead_y = gx + v[..., 0], gy + v[..., 1]
-        weight = np.clip(local_ncc(reference, _remap(frames[t], ahead_x, ahead_y)), 0.0, 1.0)
-        weight *= weight
-        if any_solid:   # the material now under a solid, and the reference's own solids
-            weight[_remap_mask(covered, ahead_x, ahead_y) | covered_key] = 0.0
-        if smoothing > 0:
-            v = normalized_convolution(v, weight, sigma)
-            if fill == "plane" and rigid is not None and tissue_key is not None:
-                # tissue under the bar carries on the visible tissue's gradient (the push's
-                # compression), not only its mean: a plane fitted around the gap
-                v = _fill_gap(v, weight, bar_now, tissue_key, 4.0 * max(sigma))
-        # back on frame 0's grid
-        if key == 0:
-            out[t] = v
-            quality[t] = np.sqrt(weight)
-        else:
-            mx, my = gx + u_key[..., 0], gy + u_key[..., 1]
-            out[t] = u_key + _remap(v, mx, my)
-            quality[t] = np.sqrt(np.clip(_remap(weight, mx, my), 0.0, 1.0))
-        rigid_path[t] = shift
+        out[t], quality[t] = tracker.update(frames[t])
         seconds[t] = time.perf_counter() - t0
-        if textured is None:
-            textured = (quality[t] > 0.5) & ~solid0
-            tissue_key = textured
-        if (keyframe_quality > 0 and t < t_count - 1 and textured.any()
-                and np.median(quality[t][textured]) < keyframe_quality):
-            key, u_key, v = t, out[t].copy(), np.zeros((h, w, 2), np.float32)
-            # frame 0's tissue pixels seen from the new reference (X ≈ Y − u(Y))
-            tissue_key = _remap_mask(textured, gx - u_key[..., 0], gy - u_key[..., 1])
-            covered_key, reference, reference_u8 = covered, frames[t], frames_u8[t]
-            lk = None
-    row, col = spacing
-    out *= np.array([col, row], np.float32)
-    out[:, solid0] = np.nan
-    quality[:, solid0] = 0.0
-    return DisplacementSeries(out, quality, spacing, estimator.lower(), seconds,
-                              rigid_path * np.array([col, row], np.float32) if rigid is not None else None)
+        if tracker.rigid is not None:
+            rigid_path[t] = tracker.rigid_shift_mm
+    return DisplacementSeries(out, quality, tracker.spacing_mm, tracker.estimator, seconds,
+                              rigid_path if tracker.rigid is not None else None)
 
 
-__all__ = ["DisplacementSeries", "displacement", "local_ncc", "QUALITY_WINDOW_PX", "KEYFRAME_QUALITY", "RigidTracker"]
+__all__ = ["DisplacementSeries", "SpeckleTracker", "displacement", "sample_field", "local_ncc", "QUALITY_WINDOW_PX", "KEYFRAME_QUALITY", "RigidTracker"]

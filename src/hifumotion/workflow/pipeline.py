@@ -30,11 +30,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Literal
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field
 
-from hifumotion.config import ConfigModel
-from hifumotion.estimation.settings import ModelSettings
-from hifumotion import paper
+from hifumotion.estimation.settings import CalibrationSettings
 
 if TYPE_CHECKING:      # the observed folder's reader pulls the image stack: imported where it runs
     from hifumotion.observed import Observed
@@ -42,61 +40,20 @@ if TYPE_CHECKING:      # the observed folder's reader pulls the image stack: imp
 Progress = Callable[[str, float], None]
 
 
-class EstimationConfig(ConfigModel):
-    """How to calibrate and predict (``[estimation]`` of a run configuration)."""
+class EstimationConfig(CalibrationSettings):
+    """How to calibrate and predict (``[estimation]`` of a run configuration): the calibration's
+    settings (:class:`~hifumotion.estimation.settings.CalibrationSettings`, one home for each)
+    and what the pipeline around it adds."""
 
-    method: Literal["least_squares", "cmaes", "table1"] = Field(
-        "least_squares", description="estimator: bounded least squares, CMA-ES, or the paper's Table 1 algorithm")
     training_frames: str | None = Field(
         None, description="training frames, '20,30,40' or '20:101:10' (default: the paper's protocol scaled to the series)")
     validation_frames: str | None = Field(
         None, description="validation frames, same forms (default: the paper's protocol scaled to the series)")
-    force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
-    search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
-    search_integrator: Literal["implicit", "reduced"] | None = Field(
-        None, description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre and again around the first optimum); default: the calibration's (estimation.calibrate.CalibrationSettings)")
-    max_evaluations: int = Field(8, ge=1, description="least squares: residual evaluations (each with a Jacobian)")
-    objective: Literal["auto", "contour", "contour+displacement"] = Field(
-        "auto", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points; auto: the displacement too where speckle tracking observed it")
-    quality_weights: bool = Field(
-        True, description="weight each contour point's residual by the speckle tracking's quality there (speckle tracking only): a boundary the image does not show (under the bar's blur, on the floor) counts for little")
-    bar_motion: bool = Field(
-        True, description="also fit the bar's tracked displacement (speckle tracking with a bar in setup.json): under a force-controlled push the bar's travel is what F/E sets most directly")
     tracking: Literal["speckle", "glcv"] = Field(
         "speckle", description="how the time series is observed: frame 0's contour carried by speckle tracking, or GLCV re-segmenting every frame (the paper)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
-    workers: int | None = Field(None, ge=1, description="Dask worker processes of the local cluster (default: the cores)")
-    scheduler_address: str | None = Field(None, description="an existing Dask cluster, tcp://host:8786")
-    model: ModelSettings = Field(
-        default_factory=ModelSettings, description="the fitted model's settings: its tissue particles (the paper: 4,399), integrator and each integrator's own (creep: the fast path's; reduced: its reduced model's); estimation.particles is short for model.tissue_particles")
-
-    @model_validator(mode="before")
-    @classmethod
-    def _particles_are_the_models(cls, data):
-        # ``particles`` (the option's and earlier configurations' name) is the model's tissue
-        # particles: one setting, one home
-        if isinstance(data, dict) and "particles" in data:
-            data = dict(data)
-            model = data.get("model")
-            model = dict(model) if isinstance(model, dict) else ({} if model is None else model)
-            if isinstance(model, dict):
-                if "tissue_particles" in model:
-                    raise ValueError("particles and model.tissue_particles are one setting; give it once")
-                model["tissue_particles"] = data.pop("particles")
-                data["model"] = model
-        return data
-
-    @field_validator("scheduler_address")
-    @classmethod
-    def _an_address(cls, v):
-        from hifumotion.estimation.evaluator import scheduler_address_problem
-
-        problem = None if v is None else scheduler_address_problem(v)
-        if problem:
-            raise ValueError(problem)
-        return v
 
 
 @dataclass
@@ -132,7 +89,7 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
     import shutil
     from contextlib import nullcontext
 
-    from hifumotion.estimation.calibrate import CalibrationSettings, calibrate
+    from hifumotion.estimation.calibrate import calibrate
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.store import save_calibration
 
@@ -148,12 +105,9 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
         observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm,
                               tracking=s.tracking)
     with stage("calibrate"):
-        cal = calibrate(observation, CalibrationSettings(
-            method=s.method, training_frames=training, force_n=s.force_n, search_particles=s.search_particles,
-            model=s.model, max_evaluations=s.max_evaluations, objective=s.objective,
-            quality_weights=s.quality_weights, bar_motion=s.bar_motion,
-            workers=s.workers, scheduler_address=s.scheduler_address,
-            **({} if s.search_integrator is None else {"search_integrator": s.search_integrator})),
+        # the pipeline's training frames, parsed once for the series (EstimationConfig is a
+        # CalibrationSettings: every other setting passes as it is)
+        cal = calibrate(observation, s.model_copy(update={"training_frames": training}),
             log_path=log, progress=tell)
     with stage("write the calibration"):
         cal.summary = save_calibration(cal, folder, observed_dir)
