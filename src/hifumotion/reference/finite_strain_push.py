@@ -1,0 +1,292 @@
+"""The twin's physics at finite strain: the tissue pushed by the bar, on FElupe (issue 41, part 1).
+
+The problem is :class:`~.creep_fe.CreepingTissue`'s — the same tissue surface, law, pool, bar
+and force schedule — and so is the answer (:class:`~.creep_fe.CreepFESolution`: the P2 nodes'
+displacement at the requested times), so either truth serves the twin. What differs is the
+mechanics, which shares neither the small-strain truth's nor the fitted model's
+approximations:
+
+* **Kinematics**: finite strain, total Lagrangian (FElupe), on the same ten-node tetrahedra
+  of a TetGen quality mesh (:mod:`._p2`).
+* **Law** (:mod:`.finite_strain`): a nearly incompressible neo-Hookean solid on a three-field
+  form, and Eq. 16's rate-dependent viscosity as a Kelvin–Voigt stress from an incremental
+  potential — checked against closed-form solutions at 30 % strain (tests/test_finite_strain.py).
+* **Time**: backward Euler, quasi-static (the push creeps over seconds; inertia is ~10⁻⁸ of
+  the forces), steps of at most ``step_s`` that land on every output time and every kink of
+  the schedule; a step that does not converge is halved.
+* **Contacts** (FElupe's penalty contact with rigid planes, Coulomb friction with an
+  elastic slip): the floor y = 0 under every surface node, and the bar's flat end under the
+  surface nodes whose rest position lies within its radius of its axis. The bar is a rigid
+  body that translates along its axis; the force schedule F(t) pushes it. Its axial stiffness
+  is the tissue's alone: to keep Newton's steps defined while it is out of contact, its
+  matrix (not its residual) holds a stiffness of the order of the tissue's under a punch,
+  so the converged balance is exact.
+* **Water**: the buoyant weight ``(ρ − ρ_w) g`` below the water line and ``ρ g`` above it,
+  per quadrature point at its rest height (as the small-strain truth).
+
+Units: mm, s, N at the interface and inside FElupe (stresses in MPa).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from hifumotion.errors import InputError
+from hifumotion.reference._p2 import MM, P2Mesh, p2_mesh
+from hifumotion.reference.creep_fe import CreepFESolution, CreepingTissue
+from hifumotion.reference.finite_strain import PA_TO_MPA, TissueLaw
+
+#: felupe's tetra10 edge order: midpoints of (0,1), (1,2), (2,0), (0,3), (1,3), (2,3)
+_TETRA10_EDGES = ((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3))
+
+
+@dataclass
+class FiniteStrainSettings:
+    """Numerical settings: the largest step (s), the contacts' penalty (a multiple of the
+    tissue's mean stiffness at the contact points), the elastic slip of a sticking contact
+    (mm), and Newton's tolerance (the free residual over the floor's reaction, FElupe's measure)."""
+
+    step_s: float = 0.05
+    contact_multiplier: float = 100.0
+    elastic_slip_mm: float = 0.005
+    newton_tol: float = 1e-7
+    max_halvings: int = 8
+
+    def __post_init__(self):
+        for name in ("step_s", "contact_multiplier", "elastic_slip_mm", "newton_tol"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise InputError(f"must be a finite number > 0, got {value}", name)
+
+
+def tetra10_cells(p2: P2Mesh) -> np.ndarray:
+    """``(cells, 10)`` indices into ``p2.points_m`` in FElupe's tetra10 order (vertices, then the
+    midpoints of the edges :data:`_TETRA10_EDGES`), from scikit-fem's vertices and edges."""
+    mesh = p2.mesh
+    t = np.asarray(mesh.t).T                                  # (cells, 4)
+    edges = np.sort(np.asarray(mesh.edges).T, axis=1)         # (edges, 2): P2 point n_vertices + e
+    n_vertices = mesh.p.shape[1]
+    key = edges[:, 0].astype(np.int64) * n_vertices + edges[:, 1]
+    order = np.argsort(key)
+    cells = np.empty((len(t), 10), np.int64)
+    cells[:, :4] = t
+    for k, (i, j) in enumerate(_TETRA10_EDGES):
+        a, b = np.minimum(t[:, i], t[:, j]), np.maximum(t[:, i], t[:, j])
+        found = order[np.searchsorted(key[order], a.astype(np.int64) * n_vertices + b)]
+        cells[:, 4 + k] = n_vertices + found
+    return cells
+
+
+class _Item:
+    """The FElupe item protocol for a force and stiffness assembled here (``vector`` is the
+    residual's contribution: internal minus external force, N; ``matrix`` its derivative)."""
+
+    def __init__(self, field):
+        from felupe.mechanics._helpers import Assemble, Results
+
+        self.field = field
+        self.results = Results()
+        self.assemble = Assemble(vector=self._vector, matrix=self._matrix)
+
+    def _size(self) -> int:
+        return int(np.sum(self.field.fieldsizes))
+
+    def _vector(self, field=None, parallel=False):
+        import scipy.sparse as sp
+
+        if field is not None:
+            self.field = field
+        self.results.force = sp.csr_matrix(self.residual().reshape(-1, 1))
+        return self.results.force
+
+    def _matrix(self, field=None, parallel=False):
+        if field is not None:
+            self.field = field
+        self.results.stiffness = self.stiffness()
+        return self.results.stiffness
+
+
+class _Weight(_Item):
+    """Gravity and the water's buoyancy: constant nodal forces (N) on the tissue."""
+
+    def __init__(self, field, nodal_force_n: np.ndarray):
+        super().__init__(field)
+        self.force = nodal_force_n
+
+    def residual(self):
+        out = np.zeros(self._size())
+        out[: self.force.size] = -self.force.ravel()
+        return out
+
+    def stiffness(self):
+        import scipy.sparse as sp
+
+        return sp.csr_matrix((self._size(), self._size()))
+
+
+class _Bar(_Item):
+    """The bar: a rigid body at point ``point`` that translates along the unit ``axis`` only,
+    pushed along it by ``force_n``. Off the axis its motion is held by a stiff penalty; along
+    it, while its face ``contact`` touches nothing, the matrix holds ``axial_n_per_mm`` that the
+    residual does not (module docstring) — once it touches, the contact's own stiffness is
+    exact and Newton converges quadratically."""
+
+    def __init__(self, field, point: int, axis: np.ndarray, axial_n_per_mm: float, contact):
+        super().__init__(field)
+        self.contact = contact
+        self.dofs = 3 * point + np.arange(3)
+        self.axis = np.asarray(axis, float) / np.linalg.norm(axis)
+        self.off_axis = np.eye(3) - np.outer(self.axis, self.axis)
+        self.k_axial = float(axial_n_per_mm)
+        self.k_off = 1e4 * float(axial_n_per_mm)
+        self.force_n = 0.0
+
+    def update(self, force_n):
+        self.force_n = float(np.asarray(force_n).ravel()[0])
+
+    def displacement_mm(self) -> np.ndarray:
+        return self.field[0].values.ravel()[self.dofs]
+
+    def residual(self):
+        out = np.zeros(self._size())
+        out[self.dofs] = self.k_off * (self.off_axis @ self.displacement_mm()) - self.force_n * self.axis
+        return out
+
+    def stiffness(self):
+        import scipy.sparse as sp
+
+        active = getattr(self.contact.results, "active", None)
+        touching = active is not None and bool(np.any(active))
+        block = self.k_off * self.off_axis + (0.0 if touching else self.k_axial) * np.outer(self.axis, self.axis)
+        rows, cols = np.meshgrid(self.dofs, self.dofs, indexing="ij")
+        n = self._size()
+        return sp.csr_matrix((block.ravel(), (rows.ravel(), cols.ravel())), shape=(n, n))
+
+
+def _weight_forces(region, points_mm: np.ndarray, problem: CreepingTissue) -> np.ndarray:
+    """``(points, 3)`` nodal forces (N) of gravity less the buoyancy below the water line,
+    integrated per quadrature point at its rest height."""
+    cells = region.mesh.cells
+    h = region.h                                                       # (nodes/cell, q, cells)
+    xq = np.einsum("aqc,cai->qci", h, points_mm[cells])                # quadrature points (mm)
+    density = np.full(xq.shape[:2], problem.density_kg_m3)
+    if problem.water_line_mm is not None:
+        density = density - np.where(xq[..., 1] < problem.water_line_mm, problem.water_density_kg_m3, 0.0)
+    load = density * problem.gravity_m_s2 * 1e-9 * region.dV           # N per quadrature point (down)
+    nodal = np.zeros(len(points_mm))
+    np.add.at(nodal, cells, np.einsum("aqc,qc->ca", h, load))
+    out = np.zeros((len(points_mm), 3))
+    out[:, 1] = -nodal
+    return out
+
+
+def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settings: FiniteStrainSettings | None = None,
+                            progress: Callable[[float], None] | None = None) -> CreepFESolution:
+    """Settle ``problem`` under gravity, the bar touching (frame 0), then push it; the
+    displacement at ``times_s`` (module docstring) as the small-strain truth returns it."""
+    import felupe as fem
+
+    started = time.perf_counter()
+    s = settings or FiniteStrainSettings()
+    times = np.asarray(times_s, float)
+    if times.ndim != 1 or len(times) == 0 or times[0] != 0.0 or np.any(np.diff(times) <= 0):
+        raise InputError("output times must start at 0 s and increase", "times_s")
+    law = TissueLaw(problem.youngs_modulus_pa, problem.poisson_ratio, problem.beta1, problem.beta2,
+                    problem.rate_floor_per_s)
+    p2 = p2_mesh(problem.vertices_mm, problem.faces, problem.max_volume_mm3)
+    points = p2.points_m / MM
+    n_tissue = len(points)
+    axis = np.asarray(problem.axis, float) / np.linalg.norm(problem.axis)
+    tip = np.asarray(problem.tip_mm, float)
+    size = float(np.ptp(points, axis=0).max())
+    # the rigid bodies' reference points, a hair inside the tissue so their contacts start active
+    touch = 1e-6 * size
+    floor_point = [points[:, 0].mean(), points[:, 1].min() + touch, points[:, 2].mean()]
+    mesh = fem.Mesh(np.vstack([points, tip + touch * axis, floor_point]), tetra10_cells(p2), "tetra10")
+    bar_point, floor_index = n_tissue, n_tissue + 1
+    region = fem.RegionQuadraticTetra(mesh)
+    u = fem.Field(region, dim=3)
+    field = fem.FieldContainer([u])
+    elastic, viscous = law.bodies(field, s.step_s)
+    surface = np.flatnonzero(p2.on_surface)
+    rel = points[surface] - tip
+    lateral = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)
+    under_bar = surface[lateral <= problem.radius_mm]
+    if len(under_bar) == 0:
+        raise InputError("no surface node lies under the bar's face", "tip_mm")
+    floor = fem.ContactRigidPlane(field, surface, floor_index, normal=[0.0, 1.0, 0.0], friction=problem.floor_friction,
+                                  multiplier=s.contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
+    face = fem.ContactRigidPlane(field, under_bar, bar_point, normal=axis, friction=problem.bar_friction,
+                                 multiplier=s.contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
+    # the tissue's stiffness under a punch of the bar's radius, 2 E a / (1 − ν²) (N/mm)
+    punch = 2.0 * problem.youngs_modulus_pa * PA_TO_MPA * problem.radius_mm / (1.0 - problem.poisson_ratio ** 2)
+    bar = _Bar(field, bar_point, axis, punch, face)
+    weight = _Weight(field, _weight_forces(region, mesh.points[:n_tissue], problem))
+    boundaries = {"floor": fem.Boundary(u, mask=np.arange(mesh.npoints) == floor_index)}
+    stats = {"steps": 0, "halvings": 0, "newton_iterations": 0}
+
+    def solve(items, force_n: float) -> bool:
+        snapshot = u.values.copy()
+        step = fem.Step(items, ramp={bar: np.array([force_n])}, boundaries=boundaries)
+        job = fem.Job([step], plugins=[fem.LinesearchPlugin()])
+        try:
+            job.evaluate(tol=s.newton_tol, verbose=0)
+        except (fem.NewtonConvergenceError, ArithmeticError, np.linalg.LinAlgError):
+            u.values[:] = snapshot
+            return False
+        return True
+
+    # frame 0: settled under gravity, the bar touching with no force
+    if not solve([elastic, weight, floor, face, bar], 0.0):
+        raise InputError("the tissue does not settle on the floor under gravity", "vertices_mm")
+    if viscous is not None:        # the viscosity's memory starts from the settled shape
+        viscous.assemble.vector(field)
+        viscous.results.update_statevars()
+    items = [elastic] + ([viscous] if viscous is not None else []) + [weight, floor, face, bar]
+    saved = [u.values[:n_tissue].copy()]
+    advance0 = float(bar.displacement_mm() @ axis)
+    advance, force = [0.0], [0.0]
+    kinks = sorted({float(b) for b in problem.breakpoints_s if 0 < b < times[-1]} | set(times[1:].tolist()))
+    t = 0.0
+    for target in kinks:
+        while t < target - 1e-12:
+            dt = min(s.step_s, target - t)
+            for _ in range(s.max_halvings + 1):
+                if viscous is not None:
+                    viscous.umat.kwargs["dtime_s"] = dt
+                if solve(items, float(problem.force_n(t + dt))):
+                    break
+                dt *= 0.5
+                stats["halvings"] += 1
+            else:
+                raise InputError(f"the push does not converge at t = {t:.4g} s even in steps of {dt:.3g} s",
+                                 "force_n")
+            t += dt
+            stats["steps"] += 1
+        if np.any(np.isclose(times, target)):
+            saved.append(u.values[:n_tissue].copy())
+            advance.append(float(bar.displacement_mm() @ axis) - advance0)
+            force.append(float(problem.force_n(target)))
+        if progress is not None:
+            progress(min(t / times[-1], 1.0))
+    displacement = np.zeros((len(saved), p2.dofs))
+    for f, values in enumerate(saved):
+        for c in range(3):
+            displacement[f, p2.dof_xyz[:, c]] = values[:, c] * MM
+    final = mesh.points[:n_tissue] + saved[-1]
+    grad = field.extract(grad=True, add_identity=True)[0]               # F at the quadrature points, last frame
+    c = np.einsum("kiqc,kjqc->qcij", grad, grad)
+    stretch = np.sqrt(np.clip(np.linalg.eigvalsh(c), 0.0, None))
+    stats.update({"dofs": int(u.values.size), "tetrahedra": int(len(mesh.cells)), "wall_s": time.perf_counter() - started,
+                  "floor_penetration_mm": float(max(0.0, floor_point[1] - touch - final[:, 1].min())),
+                  "bar_nodes": int(len(under_bar)),
+                  "largest_strain_last_frame": float(np.abs(stretch - 1.0).max()),
+                  "smallest_jacobian_last_frame": float(np.linalg.det(np.moveaxis(grad, (0, 1), (-2, -1))).min())})
+    return CreepFESolution(times, displacement, np.asarray(advance), np.asarray(force), stats, p2)
+
+
+__all__ = ["FiniteStrainSettings", "finite_strain_reference", "tetra10_cells"]

@@ -1,0 +1,83 @@
+"""The finite-strain tissue law (issue 41) against closed-form solutions at 30 % strain.
+
+A cube compressed between frictionless plates at a constant rate deforms homogeneously, so its
+force has a closed form: for an incompressible neo-Hookean solid the nominal stress is
+G (λ − λ⁻²); for the Kelvin–Voigt viscosity σ_v = 2 μ(γ̇) dev d with d = diag(λ̇/λ, −λ̇/2λ,
+−λ̇/2λ) it adds 3 μ(γ̇) λ̇ / λ², γ̇ = √3 |λ̇| / λ (Trouton's ratio at finite strain). Neither
+formula is the code's: they come from the kinematics of the homogeneous deformation.
+"""
+
+import numpy as np
+import pytest
+
+fem = pytest.importorskip("felupe")
+pytest.importorskip("tensortrax")
+
+from hifumotion.reference.finite_strain import TissueLaw  # noqa: E402
+
+
+def _compress(law: TissueLaw, stretch: float, duration_s: float, steps: int) -> tuple[float, float]:
+    """Nominal stress (MPa) on a unit cube (mm) compressed to ``stretch`` at a constant rate
+    over ``duration_s`` in ``steps`` backward-Euler steps, and the final stretch."""
+    mesh = fem.Cube(n=2)
+    u = fem.Field(fem.RegionHexahedron(mesh), dim=3)
+    field = fem.FieldContainer([u])
+    elastic, viscous = law.bodies(field, duration_s / steps)
+    items = [elastic] + ([viscous] if viscous is not None else [])
+    boundaries = {"x0": fem.Boundary(u, fx=0.0, skip=(0, 1, 1)), "y0": fem.Boundary(u, fy=0.0, skip=(1, 0, 1)),
+                  "z0": fem.Boundary(u, fz=0.0, skip=(1, 1, 0)), "move": fem.Boundary(u, fx=1.0, skip=(0, 1, 1))}
+    table = np.linspace(0.0, stretch - 1.0, steps + 1)[1:]
+    fem.Job([fem.Step(items, ramp={boundaries["move"]: table}, boundaries=boundaries)]).evaluate(tol=1e-9)
+    force = sum(np.asarray(item.results.force.toarray()).ravel() for item in items).reshape(-1, 3)
+    return float(force[boundaries["move"].points, 0].sum()), 1.0 + table[-1]
+
+
+def test_neo_hooke_compressed_by_30_percent_gives_the_incompressible_stress():
+    """E = 10 kPa, ν = 0.499: within 0.2 % of G (λ − λ⁻²) at λ = 0.7 (small strain would be 8 % off)."""
+    law = TissueLaw(1e4, 0.499)
+    stress, stretch = _compress(law, 0.7, 1.0, 8)
+    g = law.shear_modulus_mpa
+    assert stress == pytest.approx(g * (stretch - stretch ** -2), rel=2e-3)
+    assert abs(stress / (3 * g * (stretch - 1.0)) - 1.0) > 0.05       # not the linear answer
+
+
+@pytest.mark.parametrize("beta2", [0.0, 0.5])
+def test_eq16_viscosity_at_finite_strain_converges_to_trouton(beta2):
+    """β1 = 10⁵ Pa·s^(1+β2), compressed 30 % in 3 s: the force converges at first order in the
+    step to G (λ − λ⁻²) + 3 μ(γ̇) λ̇ / λ² (0.4 % at 160 steps, four times closer than at 40)."""
+    law = TissueLaw(1e4, 0.4999, beta1=1e5, beta2=beta2)
+    rate = -0.3 / 3.0
+    errors = []
+    for steps in (40, 160):
+        stress, stretch = _compress(law, 0.7, 3.0, steps)
+        mu = law.beta1 * 1e-6 * (np.sqrt(3.0) * abs(rate) / stretch) ** beta2
+        exact = law.shear_modulus_mpa * (stretch - stretch ** -2) + 3.0 * mu * rate / stretch ** 2
+        errors.append(abs(stress / exact - 1.0))
+    assert errors[1] < 4e-3 and errors[0] / errors[1] > 3.0
+
+
+def test_a_block_under_a_held_force_creeps_as_kelvin_voigt():
+    """The finite-strain push (:mod:`hifumotion.reference.finite_strain_push`) at 1 % strain: ν = 0,
+    β2 = 0 (μ = β1), a block under a held force between the floor and a bar wider than it creeps as
+    ε(t) = σ/E (1 − exp(−E t / 2μ)) — the small-strain closed form the other truth also meets
+    (tests/test_creep_fe.py), within the backward-Euler step's first-order error."""
+    pytest.importorskip("tetgen")
+    import trimesh
+
+    from hifumotion.reference.creep_fe import CreepingTissue
+    from hifumotion.reference.finite_strain_push import FiniteStrainSettings, finite_strain_reference
+
+    box = trimesh.creation.box(extents=(10.0,) * 3)
+    box.apply_translation((20.0, 5.0, 20.0))
+    e, mu, force = 1e4, 500.0, 0.01
+    problem = CreepingTissue(box.vertices, box.faces, e, 0.0, mu, 0.0, 1e-3, (20.0, 10.0, 20.0), (0.0, -1.0, 0.0),
+                             20.0, lambda t: force, (), gravity_m_s2=0.0, max_volume_mm3=50.0)
+    times = np.array([0.0, 0.05, 0.1, 0.2, 0.4])
+    exact = force / 1e-4 / e * 10.0 * (1 - np.exp(-times * e / (2 * mu)))
+    errors = []
+    for step in (0.02, 0.01):
+        sol = finite_strain_reference(problem, times, FiniteStrainSettings(step_s=step))
+        errors.append(np.abs(sol.advance_mm[1:] - exact[1:]).max() / exact[-1])
+        assert np.allclose(sol.force_n[1:], force)
+        assert sol.stats["floor_penetration_mm"] < 1e-2 * 10.0 / 2      # ≤ 1 % of the mesh's spacing
+    assert errors[1] < 0.03 and errors[1] < 0.7 * errors[0]
