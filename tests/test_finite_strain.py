@@ -44,16 +44,16 @@ def test_neo_hooke_compressed_by_30_percent_gives_the_incompressible_stress():
 @pytest.mark.parametrize("beta2", [0.0, 0.5])
 def test_eq16_viscosity_at_finite_strain_converges_to_trouton(beta2):
     """β1 = 10⁵ Pa·s^(1+β2), compressed 30 % in 3 s: the force converges at first order in the
-    step to G (λ − λ⁻²) + 3 μ(γ̇) λ̇ / λ² (0.4 % at 160 steps, four times closer than at 40)."""
+    step to G (λ − λ⁻²) + 3 μ(γ̇) λ̇ / λ² (0.5 % at 80 steps, about four times closer than at 20)."""
     law = TissueLaw(1e4, 0.4999, beta1=1e5, beta2=beta2)
     rate = -0.3 / 3.0
     errors = []
-    for steps in (40, 160):
+    for steps in (20, 80):
         stress, stretch = _compress(law, 0.7, 3.0, steps)
         mu = law.beta1 * 1e-6 * (np.sqrt(3.0) * abs(rate) / stretch) ** beta2
         exact = law.shear_modulus_mpa * (stretch - stretch ** -2) + 3.0 * mu * rate / stretch ** 2
         errors.append(abs(stress / exact - 1.0))
-    assert errors[1] < 4e-3 and errors[0] / errors[1] > 3.0
+    assert errors[1] < 6e-3 and errors[0] / errors[1] > 3.0
 
 
 def test_a_block_under_a_held_force_creeps_as_kelvin_voigt():
@@ -72,12 +72,28 @@ def test_a_block_under_a_held_force_creeps_as_kelvin_voigt():
     e, mu, force = 1e4, 500.0, 0.01
     problem = CreepingTissue(box.vertices, box.faces, e, 0.0, mu, 0.0, 1e-3, (20.0, 10.0, 20.0), (0.0, -1.0, 0.0),
                              20.0, lambda t: force, (), gravity_m_s2=0.0, max_volume_mm3=50.0)
-    times = np.array([0.0, 0.05, 0.1, 0.2, 0.4])
+    times = np.array([0.0, 0.05, 0.1, 0.2])
     exact = force / 1e-4 / e * 10.0 * (1 - np.exp(-times * e / (2 * mu)))
     errors = []
-    for step in (0.02, 0.01):
+    for step in (0.025, 0.0125):
         sol = finite_strain_reference(problem, times, FiniteStrainSettings(step_s=step))
         errors.append(np.abs(sol.advance_mm[1:] - exact[1:]).max() / exact[-1])
         assert np.allclose(sol.force_n[1:], force)
         assert sol.stats["floor_penetration_mm"] < 1e-2 * 10.0 / 2      # ≤ 1 % of the mesh's spacing
     assert errors[1] < 0.03 and errors[1] < 0.7 * errors[0]
+
+
+def test_tetra10_cells_put_each_midpoint_between_its_edges_vertices():
+    """The P2 mesh handed to FElupe (and written for ParaView): node 4 + k of every element lies
+    halfway along VTK's edge k — (0,1), (1,2), (2,0), (0,3), (1,3), (2,3) — of its vertices."""
+    pytest.importorskip("tetgen")
+    import trimesh
+
+    from hifumotion.reference._p2 import p2_mesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    sphere.apply_scale(6.0)
+    p2 = p2_mesh(sphere.vertices, sphere.faces, 5.0)
+    cells, x = p2.tetra10_cells(), p2.points_m
+    for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3))):
+        assert np.allclose(x[cells[:, 4 + k]], 0.5 * (x[cells[:, i]] + x[cells[:, j]]), atol=1e-12)

@@ -76,10 +76,11 @@ class TwinRunConfig(ConfigModel):
 
 
 class TruthConfig(ConfigModel):
-    solver: Literal["finite_elements", "particles"] = Field("finite_elements", description="what computes the truth: finite_elements (P2 tetrahedra, BDF2, Coulomb contacts; independent of the fitted voxel model) or particles (the explicit SPH path of Eq. 8–20)")
+    solver: Literal["finite_elements", "finite_strain", "particles"] = Field("finite_elements", description="what computes the truth: finite_elements (small strain: P2 tetrahedra, BDF2, Coulomb contacts; independent of the fitted voxel model), finite_strain (the same tetrahedra at finite strain on FElupe: neo-Hookean, Eq. 16's viscosity, frictional contacts; for pushes that strain the tissue beyond ~10 %) or particles (the explicit SPH path of Eq. 8–20)")
     max_volume_mm3: float = Field(8.0, gt=0, description="finite elements: largest tetrahedron in mm³")
     surface_subdivisions: int = Field(3, ge=2, le=5, description="finite elements: icosphere subdivisions of the sample's surface (3: 1,280 triangles)")
     tolerance_mm: float = Field(0.002, gt=0, description="finite elements: local error of a time step in mm")
+    step_s: float = Field(0.05, gt=0, le=1.0, description="finite strain: the largest backward-Euler step in s")
 
 
 class ProtocolConfig(ConfigModel):

@@ -1,4 +1,5 @@
-"""The twin's truth by finite elements: the sample's creep under the bar (:mod:`hifumotion.reference.creep_fe`).
+"""The twin's truth by finite elements: the sample's creep under the bar (:mod:`hifumotion.reference.creep_fe`,
+or at finite strain :mod:`hifumotion.reference.finite_strain_push`, ``truth.solver``).
 
 The fitted model is the voxel fast path (:mod:`hifumotion.creep`); the truth must not share
 its errors, so it comes from a solver that shares only the physics (module docstring of
@@ -70,8 +71,14 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
     problem, lift = fe_problem(cfg, blob, placement_mm)
     im = cfg.imaging
     times = np.arange(im.frames) / im.frame_rate_hz
-    settings = CreepFESettings(tolerance_mm=cfg.truth.tolerance_mm)
-    solution = creep_reference(problem, times, settings, progress)
+    if cfg.truth.solver == "finite_strain":
+        from hifumotion.reference.finite_strain_push import FiniteStrainSettings, finite_strain_reference
+
+        solution = finite_strain_reference(problem, times, FiniteStrainSettings(step_s=cfg.truth.step_s), progress)
+        kind = "finite_strain (P2 tetrahedra on FElupe: neo-Hooke, Eq. 16 viscosity, backward Euler, Coulomb contacts)"
+    else:
+        solution = creep_reference(problem, times, CreepFESettings(tolerance_mm=cfg.truth.tolerance_mm), progress)
+        kind = "finite_elements (P2 tetrahedra, BDF2, Coulomb contacts)"
     # the lattice rides with the sample's rest shape: lifted as its surface was
     displacement = solution.displacement_at(lattice_mm + lift)
     positions = lattice_mm[None] + lift + displacement
@@ -82,7 +89,7 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
         bar_centre = face - 0.5 * cfg.bar.length_mm * axis[None]
     else:
         bar_centre = np.full((len(times), 3), np.nan)
-    facts = {"truth_solver": "finite_elements (P2 tetrahedra, BDF2, Coulomb contacts)",
+    facts = {"truth_solver": kind,
              "bar_axis": axis.tolist(), "bar_tip_mm": face0.tolist(), "spacing_mm": spacing_mm,
              "counts": {"tissue": int(len(lattice_mm))}, "bar_force_n": solution.force_n.tolist(),
              **{f"fe_{k}": v for k, v in solution.stats.items()}}
@@ -103,8 +110,7 @@ def write_fe_frames(folder: Path, solution: CreepFESolution, every: int) -> Path
 
     (folder / "finite_elements").mkdir(parents=True, exist_ok=True)
     p2 = solution.p2
-    # meshio's tetra10 order: the four vertices, then the edges 01 12 02 03 13 23
-    cells = _tetra10(p2)
+    cells = p2.tetra10_cells()
     rest_mm = p2.points_m * 1e3
     entries = []
     for k in range(0, len(solution.times_s), every):
@@ -115,12 +121,3 @@ def write_fe_frames(folder: Path, solution: CreepFESolution, every: int) -> Path
             meshio.write(tmp, grid, file_format="vtu", binary=True)
         entries.append((float(solution.times_s[k]), path.relative_to(folder)))
     return write_pvd(folder / "finite_elements.pvd", entries)
-
-
-def _tetra10(p2) -> np.ndarray:
-    """The elements as P2 point indices in VTK's tetra10 order."""
-    point_of_dof = np.empty(p2.dofs, np.int64)
-    point_of_dof[p2.dof_xyz[:, 0]] = np.arange(len(p2.dof_xyz))
-    # scikit-fem's vector P2 element dofs: per node 3 (x,y,z) for 4 vertices, then per edge 3
-    x_dofs = p2.basis.element_dofs[0::3]           # (10, elements): the x dof of each local node
-    return point_of_dof[x_dofs].T

@@ -230,7 +230,7 @@ def simulate_truth(cfg: TwinConfig, folder: str | Path, progress: Callable[[floa
     scene_for_file.tissue.particles_csv = Path("blob_particles.csv")
     write_text(folder / "scene.toml", dump_toml(scene_for_file))
     t1 = time.perf_counter()
-    if cfg.truth.solver == "finite_elements":
+    if cfg.truth.solver in ("finite_elements", "finite_strain"):
         from hifumotion.experiment.fe_truth import simulate_fe_truth
 
         sim, _ = simulate_fe_truth(cfg, blob, pts, dx, placement, folder, progress)

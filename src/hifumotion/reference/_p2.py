@@ -32,6 +32,15 @@ class P2Mesh:
     def dofs(self) -> int:
         return int(self.basis.N)
 
+    def tetra10_cells(self) -> np.ndarray:
+        """``(elements, 10)`` point indices in VTK's (and FElupe's, meshio's) tetra10 order: the
+        four vertices, then the midpoints of the edges 01, 12, 20, 03, 13, 23 — scikit-fem's
+        local order of its P2 element's nodes."""
+        point_of_dof = np.empty(self.dofs, np.int64)
+        point_of_dof[self.dof_xyz[:, 0]] = np.arange(len(self.dof_xyz))
+        # the vector P2 element's dofs: x, y, z of each of its ten nodes in turn
+        return point_of_dof[self.basis.element_dofs[0::3]].T
+
     def probes(self, points_mm: np.ndarray):
         """``(3·n, dofs)`` sparse interpolation to ``points_mm`` — rows x of all points, then y,
         then z — and a mask of the points outside the mesh (those take their nearest P2 point)."""

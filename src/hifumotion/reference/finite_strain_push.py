@@ -36,49 +36,30 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.errors import InputError
-from hifumotion.reference._p2 import MM, P2Mesh, p2_mesh
+from hifumotion.reference._p2 import MM, p2_mesh
 from hifumotion.reference.creep_fe import CreepFESolution, CreepingTissue
 from hifumotion.reference.finite_strain import PA_TO_MPA, TissueLaw
-
-#: felupe's tetra10 edge order: midpoints of (0,1), (1,2), (2,0), (0,3), (1,3), (2,3)
-_TETRA10_EDGES = ((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3))
-
 
 @dataclass
 class FiniteStrainSettings:
     """Numerical settings: the largest step (s), the contacts' penalty (a multiple of the
     tissue's mean stiffness at the contact points), the elastic slip of a sticking contact
-    (mm), and Newton's tolerance (the free residual over the floor's reaction, FElupe's measure)."""
+    (mm), and Newton's tolerance: the largest residual force as a fraction of the problem's
+    force scale (the peak push plus the tissue's weight)."""
 
     step_s: float = 0.05
     contact_multiplier: float = 100.0
-    elastic_slip_mm: float = 0.005
-    newton_tol: float = 1e-7
+    elastic_slip_mm: float | None = 0.005
+    newton_tol: float = 1e-6
     max_halvings: int = 8
 
     def __post_init__(self):
         for name in ("step_s", "contact_multiplier", "elastic_slip_mm", "newton_tol"):
             value = getattr(self, name)
+            if value is None and name == "elastic_slip_mm":
+                continue
             if not (np.isfinite(value) and value > 0):
                 raise InputError(f"must be a finite number > 0, got {value}", name)
-
-
-def tetra10_cells(p2: P2Mesh) -> np.ndarray:
-    """``(cells, 10)`` indices into ``p2.points_m`` in FElupe's tetra10 order (vertices, then the
-    midpoints of the edges :data:`_TETRA10_EDGES`), from scikit-fem's vertices and edges."""
-    mesh = p2.mesh
-    t = np.asarray(mesh.t).T                                  # (cells, 4)
-    edges = np.sort(np.asarray(mesh.edges).T, axis=1)         # (edges, 2): P2 point n_vertices + e
-    n_vertices = mesh.p.shape[1]
-    key = edges[:, 0].astype(np.int64) * n_vertices + edges[:, 1]
-    order = np.argsort(key)
-    cells = np.empty((len(t), 10), np.int64)
-    cells[:, :4] = t
-    for k, (i, j) in enumerate(_TETRA10_EDGES):
-        a, b = np.minimum(t[:, i], t[:, j]), np.maximum(t[:, i], t[:, j])
-        found = order[np.searchsorted(key[order], a.astype(np.int64) * n_vertices + b)]
-        cells[:, 4 + k] = n_vertices + found
-    return cells
 
 
 class _Item:
@@ -206,7 +187,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     # the rigid bodies' reference points, a hair inside the tissue so their contacts start active
     touch = 1e-6 * size
     floor_point = [points[:, 0].mean(), points[:, 1].min() + touch, points[:, 2].mean()]
-    mesh = fem.Mesh(np.vstack([points, tip + touch * axis, floor_point]), tetra10_cells(p2), "tetra10")
+    mesh = fem.Mesh(np.vstack([points, tip + touch * axis, floor_point]), p2.tetra10_cells(), "tetra10")
     bar_point, floor_index = n_tissue, n_tissue + 1
     region = fem.RegionQuadraticTetra(mesh)
     u = fem.Field(region, dim=3)
@@ -227,14 +208,20 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     bar = _Bar(field, bar_point, axis, punch, face)
     weight = _Weight(field, _weight_forces(region, mesh.points[:n_tissue], problem))
     boundaries = {"floor": fem.Boundary(u, mask=np.arange(mesh.npoints) == floor_index)}
-    stats = {"steps": 0, "halvings": 0, "newton_iterations": 0}
+    stats = {"steps": 0, "halvings": 0}
+
+    # FElupe's convergence measure is |residual| / (10⁻³ + |reactions|): a tolerance of
+    # newton_tol × scale / 10⁻³ bounds the residual by newton_tol × scale (N) whatever the reactions
+    samples = np.concatenate([times, np.asarray(problem.breakpoints_s, float)])
+    scale_n = max(float(np.max([problem.force_n(t) for t in samples])), 0.0) + float(np.abs(weight.force).sum())
+    ftol = s.newton_tol * max(scale_n, 1e-9) / 1e-3
 
     def solve(items, force_n: float) -> bool:
         snapshot = u.values.copy()
         step = fem.Step(items, ramp={bar: np.array([force_n])}, boundaries=boundaries)
         job = fem.Job([step], plugins=[fem.LinesearchPlugin()])
         try:
-            job.evaluate(tol=s.newton_tol, verbose=0)
+            job.evaluate(tol=ftol, verbose=0)
         except (fem.NewtonConvergenceError, ArithmeticError, np.linalg.LinAlgError):
             u.values[:] = snapshot
             return False
@@ -284,9 +271,10 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     stats.update({"dofs": int(u.values.size), "tetrahedra": int(len(mesh.cells)), "wall_s": time.perf_counter() - started,
                   "floor_penetration_mm": float(max(0.0, floor_point[1] - touch - final[:, 1].min())),
                   "bar_nodes": int(len(under_bar)),
+                  "advance_at_rest_mm": touch + advance0,
                   "largest_strain_last_frame": float(np.abs(stretch - 1.0).max()),
                   "smallest_jacobian_last_frame": float(np.linalg.det(np.moveaxis(grad, (0, 1), (-2, -1))).min())})
     return CreepFESolution(times, displacement, np.asarray(advance), np.asarray(force), stats, p2)
 
 
-__all__ = ["FiniteStrainSettings", "finite_strain_reference", "tetra10_cells"]
+__all__ = ["FiniteStrainSettings", "finite_strain_reference"]
