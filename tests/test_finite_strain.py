@@ -41,7 +41,7 @@ def test_neo_hooke_compressed_by_30_percent_gives_the_incompressible_stress():
     assert abs(stress / (3 * g * (stretch - 1.0)) - 1.0) > 0.05       # not the linear answer
 
 
-@pytest.mark.parametrize("beta2", [0.0, 0.5])
+@pytest.mark.parametrize("beta2", [0.5])   # β2 = 0 (Newtonian): the block test below
 def test_eq16_viscosity_at_finite_strain_converges_to_trouton(beta2):
     """β1 = 10⁵ Pa·s^(1+β2), compressed 30 % in 3 s: the force converges at first order in the
     step to G (λ − λ⁻²) + 3 μ(γ̇) λ̇ / λ² (0.5 % at 80 steps, about four times closer than at 20)."""
