@@ -278,6 +278,7 @@ class OnlineSession:
         from hifumotion.contour import Contour
         from hifumotion.metrics import centroid
         from hifumotion.speckle import sample_field
+        from hifumotion.speckle.follow import carry_points
 
         started = time.perf_counter()
         field_mm, quality = self.tracker.update(frame)
@@ -290,9 +291,7 @@ class OnlineSession:
                      for h in self.horizons}
         aimed = time.perf_counter()
         # the tracked section (for the record and the hold baseline: not on the aim's path)
-        moved, _ = sample_field(field_mm, quality, self.boundary_px)
-        row, col = self.tracker.spacing_mm
-        boundary = self.boundary_px + np.nan_to_num(moved, nan=0.0) / np.array([col, row])
+        boundary, _ = carry_points(self.boundary_px, field_mm, quality, self.tracker.spacing_mm)
         mask = Contour(boundary, self.contour0.spacing_mm).to_mask(self.shape)
         tracked = np.asarray(centroid(mask, self.pixel_mm), float) if mask.any() else np.full(2, np.nan)
         t = len(self.steps) + 1

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from hifumotion.errors import InputError
 from hifumotion.rheology import RATE_FLOOR_PER_S
 
@@ -111,11 +113,8 @@ class TissueLaw:
 
 def _identity_state(field):
     """The viscous body's initial state: Cₙ = I (the rest configuration) at every quadrature point."""
-    import numpy as np
-
     region = field[0].region
-    shape = (6 + 0, region.quadrature.npoints, region.mesh.ncells)
-    state = np.zeros(shape)
+    state = np.zeros((6, region.quadrature.npoints, region.mesh.ncells))
     state[[0, 3, 5]] = 1.0                # upper triangle of I: (11, 12, 13, 22, 23, 33)
     return state
 

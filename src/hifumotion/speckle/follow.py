@@ -60,10 +60,19 @@ class FollowResult:
 
 def carry_contour(contour_px: np.ndarray, series: DisplacementSeries, frame: int) -> tuple[np.ndarray, np.ndarray]:
     """Frame-0 contour points ``(N, 2)`` px moved to ``frame``: their positions (px) and quality."""
-    disp_mm, quality = series.at(contour_px, frame)
-    row, col = series.spacing_mm
-    moved = np.asarray(contour_px, np.float64) + np.nan_to_num(disp_mm, nan=0.0) / np.array([col, row])
-    return moved, quality
+    return carry_points(contour_px, series.displacement_mm[frame], series.quality[frame], series.spacing_mm)
+
+
+def carry_points(points_px: np.ndarray, displacement_mm: np.ndarray, quality: np.ndarray,
+                 spacing_mm) -> tuple[np.ndarray, np.ndarray]:
+    """Frame-0 points ``(N, 2)`` px moved by one frame's field (``(H, W, 2)`` mm, its quality
+    ``(H, W)``, pixel ``spacing_mm`` (row, col)): their positions (px) and quality."""
+    from hifumotion.speckle.displacement import sample_field
+
+    disp_mm, q = sample_field(displacement_mm, quality, points_px)
+    row, col = spacing_mm
+    moved = np.asarray(points_px, np.float64) + np.nan_to_num(disp_mm, nan=0.0) / np.array([col, row])
+    return moved, q
 
 
 @dataclass
@@ -242,4 +251,4 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
     return FollowResult(np.stack(masks), contours, series, np.stack(quality), seconds, first)
 
 
-__all__ = ["FollowResult", "TargetSegmentation", "follow", "carry_contour", "segment_target"]
+__all__ = ["FollowResult", "TargetSegmentation", "follow", "carry_contour", "carry_points", "segment_target"]
