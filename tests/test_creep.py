@@ -299,6 +299,72 @@ def test_the_reduced_shear_rates_are_the_meshs_own():
                                m.rates((modes @ qdot).reshape(-1, 3)), rtol=1e-10)
 
 
+def _least_distance_problem(seed, rows=160, r=12):
+    # contact rows as the reduced model's: many, redundant (pairs nearly alike), in few dimensions
+    rng = np.random.default_rng(seed)
+    g = rng.normal(size=(rows // 2, r))
+    g = np.vstack([g, g + 1e-6 * rng.normal(size=g.shape)])
+    h = g @ rng.normal(size=r) - np.abs(rng.normal(size=rows))     # a point meets every row: feasible
+    return g, h
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_nnls_started_anywhere_reaches_the_optimum_scipys_finds(seed):
+    # Lawson & Hanson from a guessed passive set (creep/nnls.py) against SciPy's cold NNLS on the
+    # least-distance problems the reduced contacts make: the same residual, and the optimality
+    # conditions (w ≥ 0, gradient ≤ 0 where w = 0 and ≈ 0 where w > 0)
+    from scipy.optimize import nnls
+
+    from hifumotion.creep.nnls import nnls_from
+
+    g, h = _least_distance_problem(seed)
+    e = np.vstack([g.T, h[None]])
+    f = np.zeros(len(e))
+    f[-1] = 1.0
+    reference, _ = nnls(e, f, maxiter=5000)
+    best = np.linalg.norm(e @ reference - f)
+    rng = np.random.default_rng(seed + 10)
+    starts = [np.zeros(0, np.int64), np.flatnonzero(reference > 0), rng.choice(len(h), 30, replace=False),
+              np.arange(len(h))]
+    for start in starts:
+        w, converged = nnls_from(e, f, np.asarray(start, np.int64), 3 * len(h))
+        assert converged
+        assert w.min() >= 0.0
+        assert np.linalg.norm(e @ w - f) <= best * (1 + 1e-9) + 1e-12
+        gradient = e.T @ (f - e @ w)
+        assert gradient[w == 0].max() <= 1e-9
+        np.testing.assert_allclose(gradient[w > 0], 0.0, atol=1e-9)
+
+
+def test_the_contact_solves_response_is_its_derivative():
+    # ReducedCreep.solve_response against the contact solve's own finite differences: random
+    # stiffness, contact rows that press, right-hand sides moved along random directions by
+    # amounts too small to change which rows press
+    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings
+
+    g, h = _least_distance_problem(3, rows=80, r=10)
+    rng = np.random.default_rng(7)
+    root = rng.normal(size=(10, 10))
+    a = root @ root.T + 10 * np.eye(10)
+    rhs = rng.normal(size=10)
+    model = ReducedCreep.__new__(ReducedCreep)        # only the contact solve's parts
+    model.rows, model.bound, model._face = g, -0.2 * np.abs(h), None
+    model.settings, model.dx_m, model._pressed = ReducedSettings(contact_tolerance=1e-12), 1.0, np.zeros(0, np.int64)
+    stats = {"contact_solves": 0}
+    q = model._solve(a, rhs, stats, np.zeros(10))
+    pressed = len(model._pressed)
+    assert 0 < pressed < 10, "the problem should press some rows but not pin every coordinate"
+    directions = rng.normal(size=(10, 3))
+    response = model.solve_response(directions)
+    step = 1e-7
+    for k in range(3):
+        moved = model._solve(a, rhs + step * directions[:, k], stats, np.zeros(10))
+        assert len(model._pressed) == pressed
+        np.testing.assert_allclose((moved - q) / step, response[:, k], rtol=1e-4, atol=1e-6)
+    # the rows that press do not move; a free direction is a's own response
+    np.testing.assert_allclose(g[model._pressed] @ response, 0.0, atol=1e-8)
+
+
 def _reduced_of(solver, runs, **settings):
     from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
 

@@ -47,6 +47,7 @@ import numpy as np
 
 from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rates
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
+from hifumotion.creep.nnls import nnls_from
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
@@ -179,6 +180,8 @@ class ReducedCreep:
         self.settled_particles_mm = self.mesh.particles(basis.settled_nodes_mm)
         self.rows, self.bound, self._face = self._contact_rows(solver.contacts)
         self._pressed = np.zeros(0, np.int64)   # the rows the last contact solve pressed (its warm start)
+        nnls_from(np.eye(2), np.ones(2), self._pressed, 4)    # load the compiled solver now, not in a step
+        self._linearised = (np.eye(basis.size), None)   # the last solve's matrix and pressed rows (solve_response)
         self.friction = None
         if self.settings.friction:
             reach = self.settings.contact_reach * self.dx_m + basis.max_motion_mm * MM
@@ -259,6 +262,7 @@ class ReducedCreep:
         violated = rows @ q < bound - tol
         if len(rows) == 0 or not violated.any():
             self._pressed = np.zeros(0, np.int64)
+            self._linearised = (a, None)
             return q
         stats["contact_solves"] += 1
         inverse = np.linalg.inv(np.linalg.cholesky(a))          # L⁻¹ (r × r)
@@ -266,17 +270,38 @@ class ReducedCreep:
         h_rows = rows @ inverse.T                               # G L⁻ᵀ
         h = bound - h_rows @ y0
         index = np.flatnonzero(holds)
-        work = violated.copy()
-        work[np.isin(index, self._pressed)] = True
+        pressed = np.isin(index, self._pressed)
+        work = violated | pressed
         for _ in range(len(rows)):
-            z, weights = _least_distance(h_rows[work], h[work])
+            # NNLS starts from the rows pressed last (the last step's, then this solve's last round)
+            z, weights = _least_distance(h_rows[work], h[work], np.flatnonzero(pressed[work]))
+            pressed[:] = False
+            pressed[np.flatnonzero(work)[weights > 0]] = True
             outside = h_rows @ z < h - tol * 1e-3
             if not (outside & ~work).any():
                 break
             work |= outside
-        self._pressed = index[np.flatnonzero(work)[weights > 0]]
+        self._pressed = index[pressed]
+        self._linearised = (inverse, h_rows[pressed])
         stats["contact_rows_worked"] = max(stats.get("contact_rows_worked", 0), int(work.sum()))
         return inverse.T @ (y0 + z)
+
+    def solve_response(self, change: np.ndarray) -> np.ndarray:
+        """How the last contact solve's ``q`` moves per unit change of its right-hand side along
+        ``change`` (``(r,)`` or ``(r, c)``): its matrix inverted on the subspace the rows it
+        pressed leave free, ``L⁻ᵀ (I − Π) L⁻¹ change`` with Π the projector onto the pressed
+        rows' span in ``y = Lᵀ q`` — the derivative of the solution while the same rows press.
+        After :meth:`step`, the step's linearised response (its last friction round's matrix):
+        the online filter's Jacobian without a second step (:mod:`hifumotion.prediction.assimilate`)."""
+        a, pressed = self._linearised
+        if pressed is None:
+            return np.linalg.solve(a, change)
+        y = a @ change                     # a is L⁻¹ here
+        if len(pressed):
+            _, sigma, vt = np.linalg.svd(pressed, full_matrices=False)
+            span = vt[sigma > 1e-10 * sigma[0]]
+            y = y - span.T @ (span @ y)
+        return a.T @ y
 
     def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 16's μ per voxel (Pa·s) at the shear rates of the reduced velocity ``qdot`` (on the
@@ -446,16 +471,18 @@ def step_counters(model: ReducedCreep) -> dict:
             "viscous_voxels": model.sampled.size, "viscous_fit_residual": model.sampled.residual}
 
 
-def _least_distance(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _least_distance(g: np.ndarray, h: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The shortest ``z`` with ``g z ≥ h`` and the constraints' NNLS weights (> 0: pressed),
     by Lawson & Hanson's reduction to non-negative least squares (Solving Least Squares
-    Problems, 1974, ch. 23)."""
-    from scipy.optimize import nnls
-
+    Problems, 1974, ch. 23), started from the constraints ``start`` (indices) guessed pressed."""
     e = np.vstack([g.T, h[None]])
     f = np.zeros(len(e))
     f[-1] = 1.0
-    weights, _ = nnls(e, f, maxiter=50 * max(e.shape[1], 1))
+    weights, converged = nnls_from(e, f, np.asarray(start, np.int64), 3 * max(e.shape[1], 1))
+    if not converged:
+        from scipy.optimize import nnls
+
+        weights, _ = nnls(e, f, maxiter=50 * max(e.shape[1], 1))
     residual = e @ weights - f
     if abs(residual[-1]) < 1e-12:
         raise InputError("the reduced model's contacts cannot all be kept", "reduced model")

@@ -13,15 +13,18 @@ Optimus runs it) corrects its state with each frame's tracked displacement:
   per √s, so after a change the filter lets the data move it.
 * **Forecast.** One backward-Euler step of the frame interval from the corrected state
   (:meth:`~hifumotion.creep.reduced.ReducedCreep.step`, contacts and Eq. 16 whole). Its
-  Jacobian: ``∂q₊/∂q = A⁻¹ (C_r/Δt + M_r/Δt²)`` (the step's own matrix) and ``∂q₊/∂a``
-  by a second step at a + δa (with the contacts it meets).
+  Jacobian is the step's own linearisation
+  (:meth:`~hifumotion.creep.reduced.ReducedCreep.solve_response`): the step's matrix A
+  (its friction's tangent included) inverted on the subspace its pressed contacts leave
+  free, on ``∂rhs/∂q = C_r/Δt + M_r/Δt²`` and ``∂rhs/∂a = F(t₊) v_s``.
 * **Analysis.** The observation is the in-plane displacement since frame 0 (mm) of
   material points (the contour points A that speckle tracking carries), linear in q:
   ``y = H (q − q₀)``; its noise ``observation_noise_mm`` per coordinate.
 * **Prediction** of frame t + k: one step of k frames from the analysed state, at the
   scaled schedule's force at t + k.
 
-Everything is r + 1 dimensional (r ≈ 20–40 modes): a frame costs three reduced steps.
+Everything is r + 1 dimensional (r ≈ 20–40 modes): a frame costs one reduced step and one more
+per horizon.
 """
 
 from __future__ import annotations
@@ -52,19 +55,15 @@ class AssimilationSettings:
         The push scale's random walk (per √s): how fast the filter lets the force move.
     initial_scale_std
         The calibrated push's relative standard deviation at the start.
-    scale_step
-        δa of the forecast's derivative.
     """
 
     observation_noise_mm: float = 0.05
     model_noise_mm: float = 0.002
     scale_walk_per_sqrt_s: float = 0.5
     initial_scale_std: float = 0.1
-    scale_step: float = 0.01
 
     def __post_init__(self):
-        for name in ("observation_noise_mm", "model_noise_mm", "scale_walk_per_sqrt_s", "initial_scale_std",
-                     "scale_step"):
+        for name in ("observation_noise_mm", "model_noise_mm", "scale_walk_per_sqrt_s", "initial_scale_std"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise InputError(f"must be a finite number > 0, got {value}", name)
@@ -144,14 +143,15 @@ class OnlineAssimilator:
             raise InputError(f"expected {len(self.h)} displacement coordinates, got {y.shape}", "observed_mm")
         r = self.model.basis.size
         dt = self.dt
-        # forecast, and its Jacobian
         nominal = self._forecast(self.state, self.scale, dt)
-        delta = s.scale_step
-        pushed = self._forecast(self.state, self.scale + delta, dt)
-        a = self.loads.stiffness + self.state.viscous / dt + self.model.mass / dt ** 2
+        # the forecast's Jacobian, the step's own linearisation: its last round's matrix (friction
+        # included) on the subspace its pressed contacts leave free, applied to what q and a
+        # bring to its right-hand side (M/Δt² + C/Δt per unit q; F(t₊) v_s per unit a)
+        push = float(self.schedule(self.state.t_s + dt)) * self.model.basis.advance_modes_m
+        response = self.model.solve_response(
+            np.column_stack([self.state.viscous / dt + self.model.mass / dt ** 2, push]))
         jac = np.zeros((r + 1, r + 1))
-        jac[:r, :r] = np.linalg.solve(a, self.state.viscous / dt + self.model.mass / dt ** 2)
-        jac[:r, r] = (pushed.q - nominal.q) / delta
+        jac[:r] = response
         jac[r, r] = 1.0
         noise = np.zeros(r + 1)
         noise[:r] = (s.model_noise_mm * MM) ** 2
