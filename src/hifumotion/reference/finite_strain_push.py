@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.errors import InputError
-from hifumotion.reference._p2 import MM, p2_mesh
+from hifumotion.reference._p2 import MM, p2_mesh, spsolve
 from hifumotion.reference.creep_fe import CreepFESolution, CreepingTissue
 from hifumotion.reference.finite_strain import PA_TO_MPA, TissueLaw
 
@@ -143,8 +143,8 @@ class _Bar(_Item):
         import scipy.sparse as sp
 
         active = getattr(self.contact.results, "active", None)
-        touching = active is not None and bool(np.any(active))
-        block = self.k_off * self.off_axis + (0.0 if touching else self.k_axial) * np.outer(self.axis, self.axis)
+        axial = 0.0 if active is not None and bool(np.any(active)) else self.k_axial
+        block = self.k_off * self.off_axis + axial * np.outer(self.axis, self.axis)
         rows, cols = np.meshgrid(self.dofs, self.dofs, indexing="ij")
         n = self._size()
         return sp.csr_matrix((block.ravel(), (rows.ravel(), cols.ravel())), shape=(n, n))
@@ -186,21 +186,25 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     axis = np.asarray(problem.axis, float) / np.linalg.norm(problem.axis)
     tip = np.asarray(problem.tip_mm, float)
     size = float(np.ptp(points, axis=0).max())
-    # the rigid bodies' reference points, a hair inside the tissue so their contacts start active
-    touch = 1e-6 * size
-    floor_point = [points[:, 0].mean(), points[:, 1].min() + touch, points[:, 2].mean()]
-    mesh = fem.Mesh(np.vstack([points, tip + touch * axis, floor_point]), p2.tetra10_cells(), "tetra10")
-    bar_point, floor_index = n_tissue, n_tissue + 1
-    region = fem.RegionQuadraticTetra(mesh)
-    u = fem.Field(region, dim=3)
-    field = fem.FieldContainer([u])
-    elastic, viscous = law.bodies(field, s.step_s)
     surface = np.flatnonzero(p2.on_surface)
     rel = points[surface] - tip
     lateral = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)
     under_bar = surface[lateral <= problem.radius_mm]
     if len(under_bar) == 0:
         raise InputError("no surface node lies under the bar's face", "tip_mm")
+    # the face comes down along its axis to rest on the first node under it (as the
+    # small-strain truth's): a bar whose tip starts millimetres away would take Newton's
+    # steps of F/k to cross the gap
+    rest = float(((points[under_bar] - tip) @ axis).min())
+    # the rigid bodies' reference points, a hair inside the tissue so their contacts start active
+    touch = 1e-6 * size
+    floor_point = [points[:, 0].mean(), points[:, 1].min() + touch, points[:, 2].mean()]
+    mesh = fem.Mesh(np.vstack([points, tip + (rest + touch) * axis, floor_point]), p2.tetra10_cells(), "tetra10")
+    bar_point, floor_index = n_tissue, n_tissue + 1
+    region = fem.RegionQuadraticTetra(mesh)
+    u = fem.Field(region, dim=3)
+    field = fem.FieldContainer([u])
+    elastic, viscous = law.bodies(field, s.step_s)
     floor = fem.ContactRigidPlane(field, surface, floor_index, normal=[0.0, 1.0, 0.0], friction=problem.floor_friction,
                                   multiplier=s.contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
     face = fem.ContactRigidPlane(field, under_bar, bar_point, normal=axis, friction=problem.bar_friction,
@@ -223,7 +227,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
         step = fem.Step(items, ramp={bar: np.array([force_n])}, boundaries=boundaries)
         job = fem.Job([step], plugins=[fem.LinesearchPlugin()])
         try:
-            job.evaluate(tol=ftol, verbose=0)
+            job.evaluate(tol=ftol, verbose=0, solver=spsolve)
         except (fem.NewtonConvergenceError, ArithmeticError, np.linalg.LinAlgError):
             u.values[:] = snapshot
             return False
@@ -273,7 +277,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     stats.update({"dofs": int(u.values.size), "tetrahedra": int(len(mesh.cells)), "wall_s": time.perf_counter() - started,
                   "floor_penetration_mm": float(max(0.0, floor_point[1] - touch - final[:, 1].min())),
                   "bar_nodes": int(len(under_bar)),
-                  "advance_at_rest_mm": touch + advance0,
+                  "advance_at_rest_mm": rest + touch + advance0,
                   "largest_strain_last_frame": float(np.abs(stretch - 1.0).max()),
                   "smallest_jacobian_last_frame": float(np.linalg.det(np.moveaxis(grad, (0, 1), (-2, -1))).min())})
     return CreepFESolution(times, displacement, np.asarray(advance), np.asarray(force), stats, p2)
