@@ -197,6 +197,12 @@ class ReducedCreep:
         self._rate_modes = modes_all[rated]
         self._sample_in_rated = np.searchsorted(rated, self.sampled.voxels)
 
+    def __setstate__(self, state: dict) -> None:
+        # a model sent from a worker (Dask) or read from a cache: load the compiled contact solver
+        # here too, so that its first step does not pay for it (0.5–3 s)
+        self.__dict__.update(state)
+        nnls_from(np.eye(2), np.ones(2), np.zeros(0, np.int64), 4)
+
     def _contact_rows(self, contacts):
         """Non-penetration of the contact candidates as ``rows @ q ≥ bound`` (m), and the bar
         face's rows: ``(which rows, their nodes' offsets across the axis at q = 0 (m), and
@@ -274,7 +280,8 @@ class ReducedCreep:
         work = violated | pressed
         for _ in range(len(rows)):
             # NNLS starts from the rows pressed last (the last step's, then this solve's last round)
-            z, weights = _least_distance(h_rows[work], h[work], np.flatnonzero(pressed[work]))
+            z, weights, converged = _least_distance(h_rows[work], h[work], np.flatnonzero(pressed[work]))
+            stats["nnls_fallbacks"] = stats.get("nnls_fallbacks", 0) + int(not converged)
             pressed[:] = False
             pressed[np.flatnonzero(work)[weights > 0]] = True
             outside = h_rows @ z < h - tol * 1e-3
@@ -465,16 +472,17 @@ class ReducedState:
 
 def step_counters(model: ReducedCreep) -> dict:
     """The counters a run or a loop of steps keeps (steps, rejected, contact solves)."""
-    return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0,
+    return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0, "nnls_fallbacks": 0,
             "contact_rows": len(model.rows), "friction_rounds": 0,
             "friction_candidates": model.friction.size if model.friction is not None else 0,
             "viscous_voxels": model.sampled.size, "viscous_fit_residual": model.sampled.residual}
 
 
-def _least_distance(g: np.ndarray, h: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The shortest ``z`` with ``g z ≥ h`` and the constraints' NNLS weights (> 0: pressed),
-    by Lawson & Hanson's reduction to non-negative least squares (Solving Least Squares
-    Problems, 1974, ch. 23), started from the constraints ``start`` (indices) guessed pressed."""
+def _least_distance(g: np.ndarray, h: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The shortest ``z`` with ``g z ≥ h``, the constraints' NNLS weights (> 0: pressed) and
+    whether the warm-started NNLS converged (else SciPy's solved it cold), by Lawson & Hanson's
+    reduction to non-negative least squares (Solving Least Squares Problems, 1974, ch. 23),
+    started from the constraints ``start`` (indices) guessed pressed."""
     e = np.vstack([g.T, h[None]])
     f = np.zeros(len(e))
     f[-1] = 1.0
@@ -486,7 +494,7 @@ def _least_distance(g: np.ndarray, h: np.ndarray, start: np.ndarray) -> tuple[np
     residual = e @ weights - f
     if abs(residual[-1]) < 1e-12:
         raise InputError("the reduced model's contacts cannot all be kept", "reduced model")
-    return -residual[:-1] / residual[-1], weights
+    return -residual[:-1] / residual[-1], weights, converged
 
 
 __all__ = ["ReducedBasis", "ReducedSettings", "ReducedCreep", "ReducedLoads", "ReducedState", "pod_basis", "step_counters"]
