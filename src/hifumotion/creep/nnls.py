@@ -110,4 +110,10 @@ def nnls_from(e: np.ndarray, f: np.ndarray, start: np.ndarray, max_iter: int) ->
     return x, False
 
 
-__all__ = ["nnls_from"]
+def load_compiled() -> None:
+    """Load (or compile) :func:`nnls_from`'s machine code now: its first call reads Numba's
+    cache (0.5 s; seconds when it compiles), which should not land in a model's first step."""
+    nnls_from(np.eye(2), np.ones(2), np.zeros(0, np.int64), 4)
+
+
+__all__ = ["load_compiled", "nnls_from"]

@@ -47,7 +47,7 @@ import numpy as np
 
 from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rates
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
-from hifumotion.creep.nnls import nnls_from
+from hifumotion.creep.nnls import load_compiled, nnls_from
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
@@ -180,7 +180,7 @@ class ReducedCreep:
         self.settled_particles_mm = self.mesh.particles(basis.settled_nodes_mm)
         self.rows, self.bound, self._face = self._contact_rows(solver.contacts)
         self._pressed = np.zeros(0, np.int64)   # the rows the last contact solve pressed (its warm start)
-        nnls_from(np.eye(2), np.ones(2), self._pressed, 4)    # load the compiled solver now, not in a step
+        load_compiled()                          # the contact solver's machine code, now rather than in a step
         self._linearised = (np.eye(basis.size), None)   # the last solve's matrix and pressed rows (solve_response)
         self.friction = None
         if self.settings.friction:
@@ -198,10 +198,10 @@ class ReducedCreep:
         self._sample_in_rated = np.searchsorted(rated, self.sampled.voxels)
 
     def __setstate__(self, state: dict) -> None:
-        # a model sent from a worker (Dask) or read from a cache: load the compiled contact solver
-        # here too, so that its first step does not pay for it (0.5–3 s)
+        # a model sent from a worker (Dask) or read from a cache: its first step should not pay
+        # for loading the contact solver either
         self.__dict__.update(state)
-        nnls_from(np.eye(2), np.ones(2), np.zeros(0, np.int64), 4)
+        load_compiled()
 
     def _contact_rows(self, contacts):
         """Non-penetration of the contact candidates as ``rows @ q ≥ bound`` (m), and the bar
