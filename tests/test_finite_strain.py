@@ -56,6 +56,36 @@ def test_eq16_viscosity_at_finite_strain_converges_to_trouton(beta2):
     assert errors[1] < 6e-3 and errors[0] / errors[1] > 3.0
 
 
+@pytest.mark.parametrize("beta2", [0.0, 0.5])
+def test_the_viscous_tangent_is_the_derivative_of_its_force_at_rest_and_moving(beta2):
+    """The viscous body's matrix is the derivative of its nodal forces — checked by central
+    differences at the step's start (C = Cₙ, zero rate: every step's first Newton iteration,
+    where a max(·, 0) once cost the tangent its deviatoric part) and in a moving state."""
+    law = TissueLaw(1.3e4, 0.47, beta1=2000.0, beta2=beta2)
+    mesh = fem.Cube(n=3)
+    field = fem.FieldContainer([fem.Field(fem.RegionHexahedron(mesh), dim=3)])
+    _, viscous = law.bodies(field, 0.05)
+    rng = np.random.default_rng(3)
+    u = field[0]
+    u.values[:] = 1e-3 * rng.normal(size=u.values.shape)
+    viscous.assemble.vector(field)
+    viscous.results.update_statevars()            # Cₙ: the current shape
+    direction = 1e-2 * rng.normal(size=u.values.size)
+
+    def force(values):
+        trial = field.copy()
+        trial[0].values[:] = values.reshape(u.values.shape)
+        return np.asarray(viscous.assemble.vector(trial).toarray()).ravel()
+
+    for moved in (0.0, 1e-3):
+        x = u.values.ravel() + moved * rng.normal(size=u.values.size)
+        u.values[:] = x.reshape(u.values.shape)
+        tangent = viscous.assemble.matrix(field) @ direction
+        h = 1e-5
+        differences = (force(x + h * direction) - force(x - h * direction)) / (2 * h)
+        assert np.linalg.norm(tangent - differences) < 1e-5 * np.linalg.norm(differences)
+
+
 def test_a_block_under_a_held_force_creeps_as_kelvin_voigt():
     """The finite-strain push (:mod:`hifumotion.reference.finite_strain_push`) at 1 % strain: ν = 0,
     β2 = 0 (μ = β1), a block under a held force between the floor and a bar wider than it creeps as

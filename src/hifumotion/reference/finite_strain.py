@@ -51,7 +51,12 @@ def viscous_increment_potential(C, statevars, beta1_mpa_s_pow, beta2, rate_floor
     rate = (C - c_start) / (2.0 * dtime_s)                 # Ė (1/s)
     a = rate @ inv(C)                                      # Ė C⁻¹: d's invariants
     tr_a = tm.trace(a)
-    gamma2 = 2.0 * tm.maximum(tm.trace(a @ a) - tr_a ** 2 / 3.0, 0.0)      # γ̇² = 2 dev d : dev d
+    # γ̇² = 2 dev d : dev d, ≥ 0 up to round-off. No max(·, 0) here: at rest (C = Cₙ, the
+    # first iteration of every step) the max's derivative takes the branch 0 and the
+    # tangent loses the deviatoric viscosity — a quarter of the true one, Newton's line
+    # search then finds no decrease (docs/decisions.md, issue 41). A round-off negative
+    # only enters the floor's quadratic branch, where it is harmless.
+    gamma2 = 2.0 * (tm.trace(a @ a) - tr_a ** 2 / 3.0)
     f2 = rate_floor_per_s ** 2
     # φ(γ̇) = ∫₀^γ̇ μ(s) s ds, written in γ̇² (no square root, whose second derivative at rest
     # is infinite); the branch above the floor sees γ̇² ≥ floor² only, for the same reason

@@ -11,9 +11,11 @@ approximations:
 * **Law** (:mod:`.finite_strain`): a nearly incompressible neo-Hookean solid on a three-field
   form, and Eq. 16's rate-dependent viscosity as a Kelvin–Voigt stress from an incremental
   potential — checked against closed-form solutions at 30 % strain (tests/test_finite_strain.py).
-* **Time**: backward Euler, quasi-static (the push creeps over seconds; inertia is ~10⁻⁸ of
-  the forces), steps of at most ``step_s`` that land on every output time and every kink of
-  the schedule; a step that does not converge is halved.
+* **Time**: backward Euler, steps of at most ``step_s`` that land on every output time and
+  every kink of the schedule; a step that does not converge is halved. The push creeps over
+  seconds, so the tissue's inertia (consistent mass, as the small-strain truth's) weighs
+  ~10⁻⁸ of the forces; it is kept because it is what holds the rigid motion of a sample its
+  contacts barely hold (the frictionless floor of a sliding push).
 * **Contacts** (FElupe's penalty contact with rigid planes, Coulomb friction with an
   elastic slip): the floor y = 0 under every surface node, and the bar's flat end under the
   surface nodes whose rest position lies within its radius of its axis. The bar is a rigid
@@ -150,6 +152,52 @@ class _Bar(_Item):
         return sp.csr_matrix((block.ravel(), (rows.ravel(), cols.ravel())), shape=(n, n))
 
 
+class _Inertia(_Item):
+    """The tissue's inertia in a backward-Euler step: ``M (u − uₙ − Δt vₙ) / Δt²`` (N) with the
+    consistent mass ``M`` (kg; u in mm, so the force carries 10⁻³). Its forces are ~10⁻⁸ of the
+    push's, but it is what holds a body's rigid motion when its contacts barely do — a buoyant
+    sample under a bar that touches it at a node (as the small-strain truth's consistent mass)."""
+
+    def __init__(self, field, mass_kg):
+        import scipy.sparse as sp
+
+        super().__init__(field)
+        self.solution = field[0]            # the unknowns' own field (Newton evaluates trial copies)
+        self.mass = sp.csr_matrix(mass_kg)
+        self.dt = 1.0
+        self.rest()
+
+    def rest(self) -> None:
+        """Start from rest where the tissue is now (after the settle)."""
+        self.previous = self.solution.values.ravel().copy()
+        self.velocity = np.zeros_like(self.previous)
+
+    def start(self, dt_s: float) -> None:
+        """A step of ``dt_s`` from the last accepted state."""
+        self.dt = float(dt_s)
+
+    def accept(self) -> None:
+        """The step converged: its end is the next step's start."""
+        now = self.solution.values.ravel().copy()
+        self.velocity = (now - self.previous) / self.dt
+        self.previous = now
+
+    def residual(self):
+        out = np.zeros(self._size())
+        u = self.field[0].values.ravel()
+        out[: u.size] = self.mass @ (u - self.previous - self.dt * self.velocity) * (1e-3 / self.dt ** 2)
+        return out
+
+    def stiffness(self):
+        import scipy.sparse as sp
+
+        n = self._size()
+        k = self.mass * (1e-3 / self.dt ** 2)
+        if k.shape[0] == n:
+            return k.tocsr()
+        return sp.block_diag([k, sp.csr_matrix((n - k.shape[0], n - k.shape[0]))]).tocsr()
+
+
 def _weight_forces(region, points_mm: np.ndarray, problem: CreepingTissue) -> np.ndarray:
     """``(points, 3)`` nodal forces (N) of gravity less the buoyancy below the water line,
     integrated per quadrature point at its rest height."""
@@ -213,6 +261,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     punch = 2.0 * problem.youngs_modulus_pa * PA_TO_MPA * problem.radius_mm / (1.0 - problem.poisson_ratio ** 2)
     bar = _Bar(field, bar_point, axis, punch, face)
     weight = _Weight(field, _weight_forces(region, mesh.points[:n_tissue], problem))
+    inertia = _Inertia(field, elastic.assemble.mass(problem.density_kg_m3 * 1e-9))
     boundaries = {"floor": fem.Boundary(u, mask=np.arange(mesh.npoints) == floor_index)}
     stats = {"steps": 0, "halvings": 0}
 
@@ -239,7 +288,8 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     if viscous is not None:        # the viscosity's memory starts from the settled shape
         viscous.assemble.vector(field)
         viscous.results.update_statevars()
-    items = [elastic] + ([viscous] if viscous is not None else []) + [weight, floor, face, bar]
+    items = [elastic] + ([viscous] if viscous is not None else []) + [weight, inertia, floor, face, bar]
+    inertia.rest()
     saved = [u.values[:n_tissue].copy()]
     advance0 = float(bar.displacement_mm() @ axis)
     advance, force = [0.0], [0.0]
@@ -251,7 +301,9 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
             for _ in range(s.max_halvings + 1):
                 if viscous is not None:
                     viscous.umat.kwargs["dtime_s"] = dt
+                inertia.start(dt)
                 if solve(items, float(problem.force_n(t + dt))):
+                    inertia.accept()
                     break
                 dt *= 0.5
                 stats["halvings"] += 1
