@@ -110,6 +110,10 @@ def test_a_block_under_a_held_force_creeps_as_kelvin_voigt():
         errors.append(np.abs(sol.advance_mm[1:] - exact[1:]).max() / exact[-1])
         assert np.allclose(sol.force_n[1:], force)
         assert sol.stats["floor_penetration_mm"] < 1e-2 * 10.0 / 2      # ≤ 1 % of the mesh's spacing
+        # ν = 0 and a uniform compression: J = λ = 1 − ε, and ε is the largest principal strain
+        strain = exact[-1] / 10.0
+        assert sol.stats["smallest_jacobian"] == pytest.approx(1.0 - strain, abs=0.1 * strain)
+        assert sol.stats["largest_strain"] == pytest.approx(strain, rel=0.1)
     assert errors[1] < 0.03 and errors[1] < 0.7 * errors[0]
 
 

@@ -16,6 +16,7 @@ from typing import Callable
 
 import numpy as np
 
+from hifumotion.errors import InputError
 from hifumotion.experiment.blob import Blob
 from hifumotion.particles.simulate import SimulationResult
 from hifumotion.reference.creep_fe import CreepFESettings, CreepFESolution, CreepingTissue, creep_reference
@@ -63,6 +64,20 @@ def fe_problem(cfg, blob: Blob, placement_mm: np.ndarray) -> tuple[CreepingTissu
     return problem, lift
 
 
+#: the largest penetration of a contact a twin may have, as a fraction of the particle spacing (issue 41)
+PENETRATION_OF_SPACING = 0.01
+
+
+def physicality(stats: dict, spacing_mm: float) -> dict:
+    """A finite-strain truth's checks (issue 41): no inverted element (J > 0 at every
+    quadrature point of every frame), contacts within ``PENETRATION_OF_SPACING`` of the
+    particle spacing, and the largest strain the law was held to."""
+    penetration = max(stats["floor_penetration_mm"], stats["face_penetration_mm"])
+    return {"smallest_jacobian": stats["smallest_jacobian"], "inverted_elements": bool(stats["smallest_jacobian"] <= 0.0),
+            "largest_strain": stats["largest_strain"], "largest_penetration_mm": penetration,
+            "penetration_within_limit": bool(penetration <= PENETRATION_OF_SPACING * spacing_mm)}
+
+
 def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float, placement_mm: np.ndarray,
                       folder: str | Path | None = None, progress: Callable[[float], None] | None = None
                       ) -> tuple[SimulationResult, CreepFESolution]:
@@ -76,6 +91,10 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
 
         solution = finite_strain_reference(problem, times, FiniteStrainSettings(step_s=cfg.truth.step_s), progress)
         kind = "finite_strain (P2 tetrahedra on FElupe: neo-Hooke, Eq. 16 viscosity, backward Euler, Coulomb contacts)"
+        physical = physicality(solution.stats, spacing_mm)
+        if physical["inverted_elements"]:
+            raise InputError(f"the push inverts the tissue (smallest volume ratio J = "
+                             f"{physical['smallest_jacobian']:.3g}): lower the bar's force", "bar.force_n")
     else:
         solution = creep_reference(problem, times, CreepFESettings(tolerance_mm=cfg.truth.tolerance_mm), progress)
         kind = "finite_elements (P2 tetrahedra, BDF2, Coulomb contacts)"
@@ -93,6 +112,8 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
              "bar_axis": axis.tolist(), "bar_tip_mm": face0.tolist(), "spacing_mm": spacing_mm,
              "counts": {"tissue": int(len(lattice_mm))}, "bar_force_n": solution.force_n.tolist(),
              **{f"fe_{k}": v for k, v in solution.stats.items()}}
+    if cfg.truth.solver == "finite_strain":
+        facts["physicality"] = physicality(solution.stats, spacing_mm)
     sim = SimulationResult(times, positions, np.full(len(lattice_mm), spacing_mm ** 3), bar_centre, spacing_mm,
                            int(solution.stats["steps"]), facts, None)
     if folder is not None:

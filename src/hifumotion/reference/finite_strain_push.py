@@ -290,6 +290,24 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
         viscous.results.update_statevars()
     items = [elastic] + ([viscous] if viscous is not None else []) + [weight, inertia, floor, face, bar]
     inertia.rest()
+    floor_y = floor_point[1] - touch                     # the floor's plane (the sample's lowest point at rest)
+    face_at_rest = tip + (rest + touch) * axis           # the face's point before the bar moves
+
+    def measure() -> dict:
+        """This frame's physicality (docs/decisions.md, issue 41): the smallest volume ratio J
+        and the largest principal strain |λ − 1| over the quadrature points, and how far the
+        tissue's nodes lie inside the floor and inside the bar's face (mm)."""
+        grad = field.extract(grad=True, add_identity=True)[0]
+        c = np.einsum("kiqc,kjqc->qcij", grad, grad)
+        stretch = np.sqrt(np.clip(np.linalg.eigvalsh(c), 0.0, None))
+        x = mesh.points[:n_tissue] + u.values[:n_tissue]
+        face = face_at_rest + bar.displacement_mm()
+        return {"smallest_jacobian": float(np.linalg.det(np.moveaxis(grad, (0, 1), (-2, -1))).min()),
+                "largest_strain": float(np.abs(stretch - 1.0).max()),
+                "floor_penetration_mm": float(max(0.0, floor_y - x[:, 1].min())),
+                "face_penetration_mm": float(max(0.0, -((x[under_bar] - face) @ axis).min()))}
+
+    frames = [measure()]
     saved = [u.values[:n_tissue].copy()]
     advance0 = float(bar.displacement_mm() @ axis)
     advance, force = [0.0], [0.0]
@@ -314,6 +332,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
             stats["steps"] += 1
         if np.any(np.isclose(times, target)):
             saved.append(u.values[:n_tissue].copy())
+            frames.append(measure())
             advance.append(float(bar.displacement_mm() @ axis) - advance0)
             force.append(float(problem.force_n(target)))
         if progress is not None:
@@ -322,16 +341,15 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     for f, values in enumerate(saved):
         for c in range(3):
             displacement[f, p2.dof_xyz[:, c]] = values[:, c] * MM
-    final = mesh.points[:n_tissue] + saved[-1]
-    grad = field.extract(grad=True, add_identity=True)[0]               # F at the quadrature points, last frame
-    c = np.einsum("kiqc,kjqc->qcij", grad, grad)
-    stretch = np.sqrt(np.clip(np.linalg.eigvalsh(c), 0.0, None))
+    per_frame = {key: [f[key] for f in frames] for key in frames[0]}
     stats.update({"dofs": int(u.values.size), "tetrahedra": int(len(mesh.cells)), "wall_s": time.perf_counter() - started,
-                  "floor_penetration_mm": float(max(0.0, floor_point[1] - touch - final[:, 1].min())),
                   "bar_nodes": int(len(under_bar)),
                   "advance_at_rest_mm": rest + touch + advance0,
-                  "largest_strain_last_frame": float(np.abs(stretch - 1.0).max()),
-                  "smallest_jacobian_last_frame": float(np.linalg.det(np.moveaxis(grad, (0, 1), (-2, -1))).min())})
+                  "smallest_jacobian": min(per_frame["smallest_jacobian"]),
+                  "largest_strain": max(per_frame["largest_strain"]),
+                  "floor_penetration_mm": max(per_frame["floor_penetration_mm"]),
+                  "face_penetration_mm": max(per_frame["face_penetration_mm"]),
+                  "frames": per_frame})
     return CreepFESolution(times, displacement, np.asarray(advance), np.asarray(force), stats, p2)
 
 
