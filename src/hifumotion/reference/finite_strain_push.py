@@ -46,15 +46,17 @@ from hifumotion.reference.finite_strain import PA_TO_MPA, TissueLaw
 class FiniteStrainSettings:
     """Numerical settings: the largest step (s), the contacts' penalty (a multiple of the
     tissue's mean stiffness at the contact points), the elastic slip of a sticking contact
-    (mm), and Newton's tolerance: the largest residual force as a fraction of the problem's
-    force scale (the peak push plus the tissue's weight). 10⁻⁴ moves the bar's advance by
-    < 0.1 % from 10⁻³ and lets Newton past a contact node whose gap sits at zero, where 10⁻⁶
-    stalls (docs/decisions.md, issue 41)."""
+    (mm), and Newton's tolerance: the largest residual force (N) of a solve as a fraction of
+    its push plus the tissue's weight. At 10⁻² the push's field is within 0.2 % of FElupe's
+    own measure at 10⁻⁴ (which bounded the residual by ~3 % of the push) and the settle under
+    gravity converges (it did not: its shape changed by half with the mesh); below ~10⁻³ the
+    contacts' penalty switching holds Newton's residual near 4 × 10⁻⁴ of the push and the
+    steps crawl (docs/decisions.md, issue 41)."""
 
     step_s: float = 0.05
     contact_multiplier: float = 100.0
     elastic_slip_mm: float | None = 0.005
-    newton_tol: float = 1e-4
+    newton_tol: float = 1e-2
     max_halvings: int = 8
 
     def __post_init__(self):
@@ -198,6 +200,14 @@ class _Inertia(_Item):
         return sp.block_diag([k, sp.csr_matrix((n - k.shape[0], n - k.shape[0]))]).tocsr()
 
 
+def _absolute_residual(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
+    """FElupe's Newton check with the free dofs' residual in N (not over the reactions)."""
+    free = f[dof1] if dof1 is not None else f
+    fnorm = float(np.linalg.norm(free))
+    xnorm = float(np.linalg.norm(dx))
+    return xnorm, fnorm, bool(fnorm < ftol and xnorm < xtol)
+
+
 def _weight_forces(region, points_mm: np.ndarray, problem: CreepingTissue) -> np.ndarray:
     """``(points, 3)`` nodal forces (N) of gravity less the buoyancy below the water line,
     integrated per quadrature point at its rest height."""
@@ -265,18 +275,19 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     boundaries = {"floor": fem.Boundary(u, mask=np.arange(mesh.npoints) == floor_index)}
     stats = {"steps": 0, "halvings": 0}
 
-    # FElupe's convergence measure is |residual| / (10⁻³ + |reactions|): a tolerance of
-    # newton_tol × scale / 10⁻³ bounds the residual by newton_tol × scale (N) whatever the reactions
-    samples = np.concatenate([times, np.asarray(problem.breakpoints_s, float)])
-    scale_n = max(float(np.max([problem.force_n(t) for t in samples])), 0.0) + float(np.abs(weight.force).sum())
-    ftol = s.newton_tol * max(scale_n, 1e-9) / 1e-3
+    # Newton stops when the free residual (N) is below newton_tol × (this solve's push + the
+    # tissue's weight). FElupe's own measure divides the residual by 10⁻³ + |the floor's
+    # reaction| (≈ that sum itself), which let it stay at a few % of the push and, in the
+    # settle, at a tenth of the weight (docs/decisions.md, issue 41, session 25)
+    weight_n = float(np.abs(weight.force).sum())
 
     def solve(items, force_n: float) -> bool:
         snapshot = u.values.copy()
         step = fem.Step(items, ramp={bar: np.array([force_n])}, boundaries=boundaries)
         job = fem.Job([step], plugins=[fem.LinesearchPlugin()])
         try:
-            job.evaluate(tol=ftol, verbose=0, solver=spsolve)
+            tol_n = s.newton_tol * max(abs(force_n) + weight_n, 1e-9)
+            job.evaluate(tol=tol_n, verbose=0, solver=spsolve, check=_absolute_residual)
         except (fem.NewtonConvergenceError, ArithmeticError, np.linalg.LinAlgError):
             u.values[:] = snapshot
             return False
