@@ -86,6 +86,7 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
     problem, lift = fe_problem(cfg, blob, placement_mm)
     im = cfg.imaging
     times = np.arange(im.frames) / im.frame_rate_hz
+    physical = None
     if cfg.truth.solver == "finite_strain":
         from hifumotion.reference.finite_strain_push import FiniteStrainSettings, finite_strain_reference
 
@@ -112,8 +113,8 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
              "bar_axis": axis.tolist(), "bar_tip_mm": face0.tolist(), "spacing_mm": spacing_mm,
              "counts": {"tissue": int(len(lattice_mm))}, "bar_force_n": solution.force_n.tolist(),
              **{f"fe_{k}": v for k, v in solution.stats.items()}}
-    if cfg.truth.solver == "finite_strain":
-        facts["physicality"] = physicality(solution.stats, spacing_mm)
+    if physical is not None:
+        facts["physicality"] = physical
     sim = SimulationResult(times, positions, np.full(len(lattice_mm), spacing_mm ** 3), bar_centre, spacing_mm,
                            int(solution.stats["steps"]), facts, None)
     if folder is not None:

@@ -156,9 +156,10 @@ class _Bar(_Item):
 
 class _Inertia(_Item):
     """The tissue's inertia in a backward-Euler step: ``M (u − uₙ − Δt vₙ) / Δt²`` (N) with the
-    consistent mass ``M`` (kg; u in mm, so the force carries 10⁻³). Its forces are ~10⁻⁸ of the
-    push's, but it is what holds a body's rigid motion when its contacts barely do — a buoyant
-    sample under a bar that touches it at a node (as the small-strain truth's consistent mass)."""
+    consistent mass ``M`` (kg, over every dof of the field; u in mm, so the force carries
+    10⁻³). Its forces are ~10⁻⁸ of the push's, but it is what holds a body's rigid motion when
+    its contacts barely do — a buoyant sample under a bar that touches it at a node (as the
+    small-strain truth's consistent mass)."""
 
     def __init__(self, field, mass_kg):
         import scipy.sparse as sp
@@ -185,19 +186,11 @@ class _Inertia(_Item):
         self.previous = now
 
     def residual(self):
-        out = np.zeros(self._size())
         u = self.field[0].values.ravel()
-        out[: u.size] = self.mass @ (u - self.previous - self.dt * self.velocity) * (1e-3 / self.dt ** 2)
-        return out
+        return self.mass @ (u - self.previous - self.dt * self.velocity) * (1e-3 / self.dt ** 2)
 
     def stiffness(self):
-        import scipy.sparse as sp
-
-        n = self._size()
-        k = self.mass * (1e-3 / self.dt ** 2)
-        if k.shape[0] == n:
-            return k.tocsr()
-        return sp.block_diag([k, sp.csr_matrix((n - k.shape[0], n - k.shape[0]))]).tocsr()
+        return self.mass * (1e-3 / self.dt ** 2)
 
 
 def _absolute_residual(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
