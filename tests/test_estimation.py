@@ -498,6 +498,7 @@ def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path
     # the reduced search: the search model's around the design's centre and its best start, then
     # the final model's around the first optimum, and the full final model run once at the fit
     assert len(cal.mapped["reduced_model_centres"]) == 3 and cal.timings_s["reduced_model_s"] > 0
+    assert len(cal.timings_s["reductions"]) == 3 and all(r["snapshot_runs_s"] > 0 for r in cal.timings_s["reductions"])
     check = cal.mapped["full_model_check"]
     assert check["cost_full_model_mm"] > 0 and check["cost_reduced_model_mm"] > 0
     assert k.as_dict() == pytest.approx(cal.parameters.as_dict(), rel=1e-9)

@@ -153,13 +153,13 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         centres = []
         if reduced:     # the modes around the design's centre: every start is within a factor 4 of it
             centres.append(np.mean(space.initial_design(), axis=0))
-            timings["reduced_model_s"] = ev.reduce_around(centres[-1])
+            timings["reduced_models_s"] = [ev.reduce_around(centres[-1])]
         theta0, design = fitting.initial_guess(ev)
         if reduced:
             # the design's best start may be a factor 4 from the centre: the modes again around it,
             # so that the first search starts where its model is accurate
             centres.append(theta0)
-            timings["reduced_model_s"] += ev.reduce_around(theta0)
+            timings["reduced_models_s"].append(ev.reduce_around(theta0))
         fit_result, table1, theta = _search(ev, s, theta0)
         fit_spec = final
         if reduced:
@@ -171,7 +171,9 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             centres.append(theta)
         with (ev.sibling(fit_spec) if reduced else nullcontext(ev)) as fit_ev:
             if reduced:
-                timings["reduced_model_s"] += fit_ev.reduce_around(theta)
+                timings["reduced_models_s"].append(fit_ev.reduce_around(theta))
+                timings["reduced_model_s"] = sum(timings["reduced_models_s"])
+                timings["reductions"] = ev.reductions + fit_ev.reductions
                 fit_result, table1, theta = _search(fit_ev, s, theta)
                 mapped["reduced_model_centres"] = [c.tolist() for c in centres]
             timings["search_s"] = time.perf_counter() - t1

@@ -165,6 +165,7 @@ class Evaluator:
         # which model the runs are of: "" for the spec's own integrator; for a reduced model, the
         # θ its modes were made around (its runs differ from another reduced model's)
         self.model_tag = ""
+        self.reductions: list[dict] = []   # each reduce_around's timings (s)
         if self.log_path is not None and self.log_path.is_file():
             self._read_log()
 
@@ -276,10 +277,15 @@ class Evaluator:
             raise
         except Exception as exc:
             raise CalibrationFailed(f"the reduced model's snapshot runs at {k} failed ({brief(exc)})") from None
+        ran = time.perf_counter()
         self.spec.adopt_reduced(k, last, runs)
+        made = time.perf_counter()
         self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
         self.model_tag = "reduced@" + ",".join(f"{x:.9g}" for x in theta)
-        return time.perf_counter() - started
+        done = time.perf_counter()
+        self.reductions.append({"snapshot_runs_s": ran - started, "model_s": made - ran, "sent_s": done - made,
+                                "snapshot_run_s": [float(r.stats.get("seconds", 0.0)) for r in runs]})
+        return done - started
 
     # -- evaluation -----------------------------------------------------------
     def residuals(self, thetas: Iterable[np.ndarray], upto: int | None = None) -> list[np.ndarray]:
