@@ -365,6 +365,48 @@ def test_the_contact_solves_response_is_its_derivative():
     np.testing.assert_allclose(g[model._pressed] @ response, 0.0, atol=1e-8)
 
 
+def test_a_driven_bar_takes_the_force_its_travel_needs_and_the_block_its_poisson_bulge():
+    # travel control: the bar's end driven δ into a cube on a frictionless floor (a frictionless
+    # face wider than it): uniaxial stress, so the bar takes F = E A δ / h and the cube widens ν δ / h
+    n, e, nu, travel_m = 5, 8e3, 0.3, 0.05e-3
+    mesh = voxel_mesh(block(n), 1.0)
+    punch = Punch((n / 2 * MM, n * MM, n / 2 * MM), (0.0, -1.0, 0.0), 10 * n * MM, lambda t: 0.0, 0.0,
+                  travel_m=lambda t: travel_m if t > 0 else 0.0)
+    solver = CreepSolver(mesh, CreepMaterial(e, nu, beta1=0.0, beta2=0.0, density_kg_m3=1e-3, rate_floor_per_s=1e-12),
+                         Surroundings((0.0, 0.0, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch)
+    r = solver.run(np.array([0.0, 0.5]))
+    assert r.advance_mm[-1] == pytest.approx(travel_m / MM, rel=1e-12)
+    assert r.bar_force_n[-1] == pytest.approx(e * (n * MM) ** 2 * travel_m / (n * MM), rel=1e-6)
+    x = r.nodes_mm[-1]
+    left, right = mesh.nodes_mm[:, 0] < 1e-9, mesh.nodes_mm[:, 0] > n - 1e-9
+    assert (x[right, 0].mean() - x[left, 0].mean() - n) / n == pytest.approx(nu * travel_m / (n * MM), rel=1e-4)
+
+
+def test_a_bar_driven_at_a_steady_rate_takes_the_kelvin_voigt_force_in_full_and_reduced():
+    # ν = 0, Eq. 16's μ constant: a cube driven at a steady rate v takes F = A (E v t + 2 μ v) / h
+    # (the elastic stress and the viscous one, σ_v = 2 μ ε̇, with no lateral strain). The reduced
+    # model's modes come from the full run at v; it is run at 2 v, which its snapshots never had.
+    n, e, mu = 3, 5e3, 2e3
+    tau = 2 * mu / e
+    times = np.array([0.0, 0.5, 1.0, 2.0, 4.0]) * tau
+    rate = 0.05e-3 / times[-1]                       # m/s: 0.05 mm over the run
+    mesh = voxel_mesh(block(n), 1.0)
+    material = CreepMaterial(e, 0.0, beta1=mu, beta2=0.0, density_kg_m3=1e-3, rate_floor_per_s=1e-12)
+    punch = Punch((n / 2 * MM, n * MM, n / 2 * MM), (0.0, -1.0, 0.0), 10 * n * MM, lambda t: 0.0, 0.0,
+                  travel_m=lambda t: rate * t)
+    full = CreepSolver(mesh, material, Surroundings((0.0, 0.0, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch,
+                       CreepSettings(tolerance=0.001))
+    r = full.run(times)
+    area_over_height = (n * MM) ** 2 / (n * MM)
+    expected = area_over_height * (e * rate * times + 2 * mu * rate)
+    np.testing.assert_allclose(r.bar_force_n[1:], expected[1:], rtol=1e-6)
+    np.testing.assert_allclose(r.advance_mm, rate * times / MM, rtol=1e-9, atol=1e-12)
+    reduced = _reduced_of(full, [r], tolerance=0.001)
+    fast = reduced.run(material, lambda t: 0.0, (), times, travel_m=lambda t: 2 * rate * t)
+    np.testing.assert_allclose(fast.advance_mm, 2 * rate * times / MM, rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(fast.bar_force_n[1:], 2 * expected[1:], rtol=1e-3)
+
+
 def _reduced_of(solver, runs, **settings):
     from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
 

@@ -106,7 +106,9 @@ class Punch:
     """The bar's flat end: a disc of ``radius_m`` at ``tip_m``, pushed along unit ``axis``.
 
     ``force_n(t)`` is the push (N) at time t (s); ``breakpoints_s`` the times where the
-    schedule bends (the integrator lands a step on each).
+    schedule bends (the integrator lands a step on each). With ``travel_m`` (travel control)
+    the bar is driven instead: its end is ``travel_m(t)`` (m) along the axis beyond where it
+    rests on the settled tissue, ``force_n`` is not read, and the force it takes is a result.
     """
 
     tip_m: tuple[float, float, float]
@@ -115,6 +117,12 @@ class Punch:
     force_n: Callable[[float], float]
     friction: float = 0.5
     breakpoints_s: tuple[float, ...] = ()
+    travel_m: Callable[[float], float] | None = None
+
+    @property
+    def driven(self) -> bool:
+        """Whether the bar's travel is given (travel control) rather than its force."""
+        return self.travel_m is not None
 
 
 def _frames(normals: np.ndarray) -> np.ndarray:

@@ -26,6 +26,10 @@ gradients preconditioned by the last factorisation absorb the change of μ). Ste
 on the force schedule's breakpoints; output frames are interpolated linearly between
 the steps around them.
 
+The bar is pushed by its force schedule (its advance one more unknown, balanced by its
+contacts' reactions) or, in travel control, driven: its advance is given, its contacts'
+normal displacements follow it, and the force it takes is their reactions' sum.
+
 Water: the fast path carries it as buoyancy — each submerged voxel weighs
 ``(ρ − ρ_w) g V`` — and no drag (the hydrostatic pressure on a submerged surface sums
 to exactly that force; its uniform compression ρ_w g h / K is below 10⁻³ here).
@@ -152,6 +156,9 @@ class CreepSolver:
         self.punch = punch
         self._fixed_pattern()
         self.advance_m = 0.0
+        # a driven bar's advance at rest on the settled tissue (m): its travel counts from there;
+        # None while the tissue settles (the bar then rests on it, as an unloaded bar does)
+        self._rest_advance: float | None = None
         self._factor: Factor | None = None
         self._reduction_key = None
         self.stats = {"steps": 0, "rejected": 0, "factorisations": 0, "solves": 0, "cg_iterations": 0,
@@ -181,7 +188,7 @@ class CreepSolver:
         an identity row in the reduced system. Returns (T, g, s's column or −1, constrained)."""
         key = self.contacts.version
         if self._reduction_key == key:
-            return self._t, self._g_const, self._s_col, self._constrained
+            return self._t, self._g_with_advance(), self._s_col, self._constrained
         cs = self.contacts
         n = len(self.rest_m)
         rows, cols, vals = [], [], []
@@ -218,8 +225,9 @@ class CreepSolver:
                 cols.append(np.full(3 * len(on_punch), s_col))
                 vals.append(frames[on_punch, 0].ravel())
         size = 3 * n + (1 if s_col >= 0 else 0)
-        if s_col >= 0 and not np.any(cs.body == cs.punch_index):
-            # a bar touching nothing: its advance is no unknown of the tissue's (an identity row)
+        if s_col >= 0 and (self._driven() or not np.any(cs.body == cs.punch_index)):
+            # a bar touching nothing, or a driven one: its advance is no unknown of the tissue's
+            # (an identity row); a driven bar's nodes take its advance in g
             constrained.append(np.array([s_col]))
             s_col = -1
         t = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, size))
@@ -227,7 +235,17 @@ class CreepSolver:
         self._columns, self._bar_normal = columns, bar_normal
         self._constrained = np.concatenate(constrained).astype(np.int64)
         self._reduction_key = key
-        return self._t, self._g_const, self._s_col, self._constrained
+        return self._t, self._g_with_advance(), self._s_col, self._constrained
+
+    def _driven(self) -> bool:
+        """Whether the bar's advance is given this step (travel control, once the tissue has settled)."""
+        return self.punch is not None and self.punch.driven and self._rest_advance is not None
+
+    def _g_with_advance(self) -> np.ndarray:
+        """``g`` of :meth:`_reduction` (m, flat): a driven bar's nodes at its face, where its advance puts it."""
+        if not self._driven():
+            return self._g_const
+        return self._g_const + self.advance_m * self._bar_normal.ravel()
 
     def _fixed_pattern(self) -> None:
         """The reduced system's one CSR pattern: the mesh's node-pair blocks, plus a full row and
@@ -327,7 +345,9 @@ class CreepSolver:
             size = t.shape[1]
             indptr, indices = self._pattern
             # Pᵢᵀ Aᵢⱼ Pⱼ block by block on A's own pattern (:mod:`.reduce`)
-            data = reduced_matrix_data(a.indptr, a.indices, a.data, self._columns, self._bar_normal,
+            # a driven bar's advance is given: its nodes do not couple to it
+            coupled = np.zeros_like(self._bar_normal) if self._driven() else self._bar_normal
+            data = reduced_matrix_data(a.indptr, a.indices, a.data, self._columns, coupled,
                                        self.punch is not None)
             # a constrained unknown's row is the identity times its node's mean diagonal (q = 0
             # there): the scale it has when it is free, so that the factorisation of one contact
@@ -409,8 +429,14 @@ class CreepSolver:
     def step(self, u: np.ndarray, v: np.ndarray, t_new: float, dt: float,
              mu: np.ndarray | None) -> tuple[np.ndarray, float]:
         """Displacement (m, (n, 3)) at ``t_new`` after a step ``dt`` from (u, v); the bar's force taken."""
-        force = float(self.punch.force_n(t_new)) if self.punch is not None else 0.0
-        unloaded = self.punch is not None and force <= 0.0
+        if self._driven():
+            # travel control: the bar is where its schedule puts it, and its force is what its
+            # contacts take (no force balance: its advance is no unknown)
+            self.advance_m = self._rest_advance + float(self.punch.travel_m(t_new))
+            force, unloaded = 0.0, False
+        else:
+            force = float(self.punch.force_n(t_new)) if self.punch is not None else 0.0
+            unloaded = self.punch is not None and force <= 0.0
         if unloaded:
             # a bar with no push holds nothing: it rests on the tissue and follows it after each
             # solve (as the twin's truth, reference.creep_fe.follow); held with zero force it
@@ -464,6 +490,7 @@ class CreepSolver:
         n = len(self.rest_m)
         st = self.settings
         cs = self.contacts
+        self._rest_advance = None
         # resting: the nodes on a surface start touching it, anchored where they are
         gap, which = cs.gaps(np.zeros((n, 3)), 0.0)
         resting = np.flatnonzero((which >= 0) & (which < cs.punch_index) & (gap <= st.contact_tolerance * self.dx_m))
@@ -481,6 +508,9 @@ class CreepSolver:
             under = which == cs.punch_index
             if under.any():
                 self.advance_m += float(gap[under].min())
+            if self.punch.driven:
+                self._rest_advance = self.advance_m
+                cs.version += 1   # the bar's nodes now take its advance, not an unknown of their own
         v = np.zeros((n, 3))
         t = 0.0
         interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)

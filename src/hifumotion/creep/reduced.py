@@ -339,15 +339,26 @@ class ReducedCreep:
         return self.lag_viscosity(ReducedState(0.0, q, np.zeros(r), np.zeros((r, r)), None), loads)
 
     def step(self, state: "ReducedState", loads: "ReducedLoads", dt: float, force_n: float,
-             stats: dict | None = None, error: bool = True) -> tuple["ReducedState", float]:
+             stats: dict | None = None, error: bool = True, advance_m: float | None = None
+             ) -> tuple["ReducedState", float]:
         """One backward-Euler step of ``dt`` (s) from ``state`` with the bar's ``force_n`` (N) at its
         end; the new state and the step's local error (m, ½ Δt max |u̇₊ − u̇| over the nodes;
-        NaN with ``error=False``, which saves a product over every node)."""
+        NaN with ``error=False``, which saves a product over every node).
+
+        ``advance_m`` (travel control): the bar's advance (m) from the snapshots' settled state
+        at the step's end, given instead of its force (``force_n`` is then not read): held by a
+        penalty, :func:`driven_bar`; the force it takes is ``stats["bar_force_n"]``."""
         stats = step_counters(self) if stats is None else stats
         q, qdot, visc = state.q, state.qdot, state.viscous
         a = loads.stiffness + visc / dt + self.mass / dt ** 2
-        rhs = (loads.load + force_n * self.basis.advance_modes_m + self.mass @ (q + dt * qdot) / dt ** 2
-               + visc @ q / dt)
+        rhs = self.mass @ (q + dt * qdot) / dt ** 2 + visc @ q / dt + loads.load
+        spring = None
+        if advance_m is None:
+            rhs = rhs + force_n * self.basis.advance_modes_m
+        else:
+            spring, target = driven_bar(a, self.basis.advance_modes_m), float(advance_m)
+            a = a + spring * np.outer(self.basis.advance_modes_m, self.basis.advance_modes_m)
+            rhs = rhs + spring * target * self.basis.advance_modes_m
         friction = state.friction
         if friction is None or not np.any(friction.limit_n > 0):
             qnew = self._solve(a, rhs, stats, q)
@@ -365,6 +376,8 @@ class ReducedCreep:
                 guess = qnew
         qdot_new = (qnew - q) / dt
         err = 0.5 * dt * float(np.abs(self.basis.node_modes_m @ (qdot_new - qdot)).max()) if error else np.nan
+        if spring is not None:
+            stats["bar_force_n"] = spring * (target - float(self.basis.advance_modes_m @ qnew))
         return ReducedState(state.t_s + dt, qnew, qdot_new, visc, friction), err
 
     def lag_viscosity(self, state: "ReducedState", loads: "ReducedLoads") -> "ReducedState":
@@ -384,12 +397,14 @@ class ReducedCreep:
 
     def run(self, material: CreepMaterial, force_n: Callable[[float], float], breakpoints_s: Sequence[float],
             output_times_s: np.ndarray, progress: Callable[[float], None] | None = None,
-            nodes: bool = True) -> CreepResult:
+            nodes: bool = True, travel_m: Callable[[float], float] | None = None) -> CreepResult:
         """Push from the settled state: ``force_n(t)`` (N) on the bar; frames at ``output_times_s``.
 
-        Returns the full model's :class:`~.integrate.CreepResult` (nodes, particles, the
-        bar's advance and force at every frame); ``nodes=False`` leaves the nodes out (none
-        of the particles' consumers needs them; they cost as much again).
+        ``travel_m(t)`` (travel control, m): the bar driven that far along its axis beyond
+        where it rests on this material's settled state, ``force_n`` then not read (the
+        force it takes is a result). Returns the full model's :class:`~.integrate.CreepResult`
+        (nodes, particles, the bar's advance and force at every frame); ``nodes=False`` leaves
+        the nodes out (none of the particles' consumers needs them; they cost as much again).
         """
         started = time.perf_counter()
         times = np.asarray(output_times_s, float)
@@ -399,10 +414,11 @@ class ReducedCreep:
         b = self.basis
         r = b.size
         loads = self.loads(material)
-        f0 = float(force_n(0.0))
+        f0 = 0.0 if travel_m is not None else float(force_n(0.0))
         stats = step_counters(self)
         self._pressed = np.zeros(0, np.int64)   # a run does not depend on the one before
         state = self.settle(loads, f0, stats)
+        rest = float(b.advance_modes_m @ state.q)   # a driven bar's travel counts from its place at rest
         interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)
         base = st.first_step_s or interval / 4.0
         level = 0
@@ -417,8 +433,12 @@ class ReducedCreep:
             landing = t + dt >= nxt - 1e-9 * dt
             if landing:
                 dt = nxt - t
-            force = float(force_n(t + dt))
-            new, err = self.step(state, loads, dt, force, stats)
+            if travel_m is None:
+                force = float(force_n(t + dt))
+                new, err = self.step(state, loads, dt, force, stats)
+            else:
+                new, err = self.step(state, loads, dt, 0.0, stats, advance_m=rest + float(travel_m(t + dt)))
+                force = stats["bar_force_n"]
             if err > 2.0 * limit and dt > 1e-6 * base and not (t == 0.0 and level < -12):
                 stats["rejected"] += 1
                 level -= 1
@@ -443,6 +463,22 @@ class ReducedCreep:
         force = np.interp(times, st_t, np.array(saved_f))
         stats.update(seconds=time.perf_counter() - started, advance_at_rest_mm=b.advance_at_rest_mm)
         return CreepResult(times, nodes_mm, self.particles_mm(qs), advance_mm, force, stats)
+
+
+#: A driven bar's penalty: this many times the step matrix's largest diagonal entry along its
+#: advance, so that it misses its schedule by ~10⁻⁶ of what the tissue's own stiffness would let it.
+DRIVEN_PENALTY = 1e6
+
+
+def driven_bar(a: np.ndarray, advance_modes_m: np.ndarray) -> float:
+    """The penalty stiffness (N/m) that holds the bar's advance ``advance_modes_m @ q`` at its
+    schedule in a step of matrix ``a``: its force is the spring's, ``k (target − s)``. A penalty
+    rather than a multiplier keeps the contact solve's problem a least-distance one."""
+    along = float(advance_modes_m @ advance_modes_m)
+    if along <= 0.0:
+        raise InputError("the reduced model's modes never move the bar: its travel cannot be driven "
+                         "(snapshots of a bar that touched the tissue are needed)", "bar.control")
+    return DRIVEN_PENALTY * float(np.abs(np.diag(a)).max()) / along
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,12 @@ def scene_punch(scene: Scene, tissue_mm: np.ndarray, spacing_mm: float) -> tuple
         tip = centre if tip is None else tip
     else:
         tip = np.asarray(bar.tip_mm, float)
+    breaks = bar.breakpoints_s()
+    if bar.control == "travel":
+        # a driven bar: where it is, not what it weighs, is given (its guide carries the rest)
+        travel_mm = bar.travel_schedule()
+        return Punch(tuple(tip * MM), tuple(axis), bar.radius_mm * MM, lambda t: 0.0, scene.physics.friction, breaks,
+                     travel_m=lambda t: float(travel_mm(t)) * MM), axis
     schedule = bar.schedule()
     extra = 0.0
     if not bar.weight_supported:
@@ -62,7 +68,6 @@ def scene_punch(scene: Scene, tissue_mm: np.ndarray, spacing_mm: float) -> tuple
         wet = scene.tank.water_depth_mm > 0
         rho = bar.density_kg_m3 - (scene.physics.water_density_kg_m3 if wet else 0.0)
         extra = rho * volume * scene.physics.gravity_m_s2 * float(-axis[1])
-    breaks = tuple(bar.schedule_times_s) if bar.schedule_times_s is not None else ((bar.ramp_s,) if bar.ramp_s > 0 else ())
 
     def force(t: float) -> float:
         return max(float(schedule(t)) + extra, 0.0)
@@ -211,7 +216,9 @@ def simulate_reduced(scene: Scene, reduced, tissue_volume_mm3: np.ndarray,
     mesh = reduced.mesh
     punch, axis = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
     force, breaks = (punch.force_n, punch.breakpoints_s) if punch is not None else ((lambda t: 0.0), ())
-    result = reduced.run(scene_material(scene), force, breaks, output_times(scene), progress, nodes=keep is not None)
+    travel = punch.travel_m if punch is not None else None
+    result = reduced.run(scene_material(scene), force, breaks, output_times(scene), progress, nodes=keep is not None,
+                         travel_m=travel)
     if keep is not None:
         keep.append(result)
     return simulation_result(scene, mesh, np.asarray(tissue_volume_mm3, float), result,

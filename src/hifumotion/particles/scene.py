@@ -102,30 +102,55 @@ class BarConfig(ConfigModel):
     tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: touching the tissue (one spacing from the first tissue particle under its end face), on the axis through the tissue's centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
     weight_supported: bool = Field(True, description="the hand holding the bar carries its weight, so the push on the tissue is force_n alone")
+    control: Literal["force", "travel"] = Field("force", description="what drives the bar: force (it pushes with force_n or schedule_force_n, and how far it goes is a result) or travel (its end is driven along its axis by travel_mm or schedule_travel_mm from where it rests on the settled tissue, and the force it takes is a result)")
     force_n: float = Field(paper.FORCE_N, ge=0, description="pushing force held after the ramp, in N (Table 3: 0.25); the bar pushes, it does not pull")
-    ramp_s: float = Field(0.2, ge=0, description="time over which the force rises linearly from 0, in s")
-    schedule_times_s: list[float] | None = Field(None, description="explicit force schedule: times in s (overrides force_n/ramp_s)")
-    schedule_force_n: list[float] | None = Field(None, description="explicit force schedule: forces in N")
+    travel_mm: float = Field(0.0, ge=0, description="travel control: how far the bar's end is driven along its axis by the end of the ramp, in mm, from where it rests on the settled tissue")
+    ramp_s: float = Field(0.2, ge=0, description="time over which the force (travel control: the travel) rises linearly from 0, in s")
+    schedule_times_s: list[float] | None = Field(None, description="explicit schedule: times in s (overrides force_n or travel_mm, and ramp_s)")
+    schedule_force_n: list[float] | None = Field(None, description="explicit force schedule: forces in N at schedule_times_s")
+    schedule_travel_mm: list[float] | None = Field(None, description="travel control: explicit schedule of the travel in mm at schedule_times_s (≥ 0: the bar never pulls the tissue; a travel that falls lifts the bar off as the tissue lets it)")
 
     @model_validator(mode="after")
     def _schedule(self):
-        if (self.schedule_times_s is None) != (self.schedule_force_n is None):
-            raise ValueError("give both schedule_times_s and schedule_force_n, or neither")
+        values = self.schedule_travel_mm if self.control == "travel" else self.schedule_force_n
+        name = "schedule_travel_mm" if self.control == "travel" else "schedule_force_n"
+        other = "schedule_force_n" if self.control == "travel" else "schedule_travel_mm"
+        if getattr(self, other) is not None:
+            raise ValueError(f"{other} does not drive a bar in {self.control} control; give {name}")
+        if (self.schedule_times_s is None) != (values is None):
+            raise ValueError(f"give both schedule_times_s and {name}, or neither")
         if self.schedule_times_s is not None:
-            piecewise_linear_schedule(self.schedule_times_s, self.schedule_force_n)
-            if any(not (f >= 0) for f in self.schedule_force_n):
-                raise ValueError("schedule_force_n: the bar pushes, it does not pull; forces must be ≥ 0 N")
+            piecewise_linear_schedule(self.schedule_times_s, values)
+            if any(not (f >= 0) for f in values):
+                raise ValueError(f"{name}: the bar pushes, it does not pull; values must be ≥ 0")
         if np.linalg.norm(self.direction) == 0:
             raise ValueError("direction must not be zero")
         return self
 
     def schedule(self):
+        """The push F(t) (N) of a bar in force control (none in travel control: the force is a result)."""
+        if self.control == "travel":
+            raise ValueError("a bar in travel control has no force schedule: its force is a result")
+        return self._piecewise(self.schedule_force_n, self.force_n)
+
+    def travel_schedule(self):
+        """The travel (mm) of a bar in travel control at time t (s), from where it rests on the settled tissue."""
+        if self.control != "travel":
+            raise ValueError("a bar in force control has no travel schedule: its travel is a result")
+        return self._piecewise(self.schedule_travel_mm, self.travel_mm)
+
+    def breakpoints_s(self) -> tuple[float, ...]:
+        """Where the schedule bends (s): a time stepper lands a step on each."""
         if self.schedule_times_s is not None:
-            return piecewise_linear_schedule(self.schedule_times_s, self.schedule_force_n)
+            return tuple(self.schedule_times_s)
+        return (self.ramp_s,) if self.ramp_s > 0 else ()
+
+    def _piecewise(self, values, held):
+        if self.schedule_times_s is not None:
+            return piecewise_linear_schedule(self.schedule_times_s, values)
         if self.ramp_s > 0:
-            return piecewise_linear_schedule([0.0, self.ramp_s], [0.0, self.force_n])
-        value = self.force_n
-        return lambda t: value
+            return piecewise_linear_schedule([0.0, self.ramp_s], [0.0, held])
+        return lambda t: held
 
 
 class ParticleConfig(ConfigModel):
@@ -337,6 +362,9 @@ def build_scene(scene: Scene, tissue_particles: tuple[np.ndarray, np.ndarray] | 
     """
     dx_mm = scene.particles.spacing_mm
     tank = scene.tank
+    if scene.bar.enabled and scene.bar.control == "travel":
+        raise InputError("the particle path (Eq. 8–20) pushes its bar by a force; a bar in travel control runs on "
+                         "the implicit or reduced path, or the finite-strain truth", "bar.control")
     n = estimated_particles(scene) + (0 if tissue_particles is None else len(tissue_particles[0]))
     check_memory(n * BYTES_PER_PARTICLE, f"about {n:.3g} particles at a spacing of {dx_mm:g} mm",
                  "particles.spacing_mm")
