@@ -117,6 +117,33 @@ def test_a_block_under_a_held_force_creeps_as_kelvin_voigt():
     assert errors[1] < 0.03 and errors[1] < 0.7 * errors[0]
 
 
+def test_a_block_under_a_driven_bar_takes_the_kelvin_voigt_force_of_its_travel():
+    """Travel control (issue 41, part 2): the same block with the bar's face driven at a steady
+    rate v to 1 % strain (ν = 0, μ = β1): its advance is the travel and the force it takes
+    A (E v t + 2 μ v) / h, the elastic and the viscous stress of the small-strain closed form
+    (backward Euler is exact on a steady rate; finite strain moves it by O(ε))."""
+    pytest.importorskip("tetgen")
+    import trimesh
+
+    from hifumotion.reference.creep_fe import CreepingTissue
+    from hifumotion.reference.finite_strain_push import FiniteStrainSettings, finite_strain_reference
+
+    box = trimesh.creation.box(extents=(10.0,) * 3)
+    box.apply_translation((20.0, 5.0, 20.0))
+    e, mu = 1e4, 500.0
+    times = np.array([0.0, 0.05, 0.1, 0.2])
+    rate = 0.1 / times[-1]                              # mm/s: 0.1 mm, 1 % strain, at the end
+    problem = CreepingTissue(box.vertices, box.faces, e, 0.0, mu, 0.0, 1e-3, (20.0, 10.0, 20.0), (0.0, -1.0, 0.0),
+                             20.0, lambda t: 0.0, (), gravity_m_s2=0.0, max_volume_mm3=50.0,
+                             travel_mm=lambda t: rate * t)
+    sol = finite_strain_reference(problem, times, FiniteStrainSettings(step_s=0.025))
+    area_m2, height_mm = 1e-4, 10.0
+    expected = area_m2 * (e * rate * times / height_mm + 2 * mu * rate / height_mm)
+    np.testing.assert_allclose(sol.advance_mm, rate * times, atol=1e-9)
+    np.testing.assert_allclose(sol.force_n[1:], expected[1:], rtol=0.02)
+    assert sol.stats["smallest_jacobian"] == pytest.approx(0.99, abs=1e-3)
+
+
 def test_tetra10_cells_put_each_midpoint_between_its_edges_vertices():
     """The P2 mesh handed to FElupe (and written for ParaView): node 4 + k of every element lies
     halfway along VTK's edge k — (0,1), (1,2), (2,0), (0,3), (1,3), (2,3) — of its vertices."""

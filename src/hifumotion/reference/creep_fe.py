@@ -55,6 +55,9 @@ class CreepingTissue:
 
     ``breakpoints_s``: the times where the force schedule bends (steps land on them).
     ``water_line_mm``: the water surface's height (None: dry).
+    ``travel_mm(t)``: travel control — the bar driven that far (mm) along its axis from where
+    it rests on the settled tissue, ``force_n`` then not read (its force is a result); only
+    the finite-strain truth drives a bar (:mod:`.finite_strain_push`).
     """
 
     vertices_mm: np.ndarray
@@ -77,6 +80,7 @@ class CreepingTissue:
     bar_friction: float = 0.5
     mu_max_pa_s: float = MU_MAX_PA_S
     max_volume_mm3: float = 2.0
+    travel_mm: Callable[[float], float] | None = None
 
 
 @dataclass
@@ -523,6 +527,9 @@ def creep_reference(problem: CreepingTissue, times_s: np.ndarray, settings: Cree
     times = np.asarray(times_s, float)
     if times.ndim != 1 or len(times) == 0 or times[0] != 0.0 or np.any(np.diff(times) <= 0):
         raise InputError("output times must start at 0 s and increase", "times_s")
+    if problem.travel_mm is not None:
+        raise InputError("the small-strain truth pushes its bar by a force; a bar in travel control needs "
+                         "truth.solver = finite_strain", "bar.control")
     solver = _Solver(problem, settings)
     cs = solver.contacts
     # resting: the lowest surface points stand on the floor, stuck

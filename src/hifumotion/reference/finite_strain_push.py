@@ -22,7 +22,9 @@ approximations:
   body that translates along its axis; the force schedule F(t) pushes it. Its axial stiffness
   is the tissue's alone: to keep Newton's steps defined while it is out of contact, its
   matrix (not its residual) holds a stiffness of the order of the tissue's under a punch,
-  so the converged balance is exact.
+  so the converged balance is exact. In travel control (``CreepingTissue.travel_mm``) the
+  bar is driven instead: from where it rests on the settled tissue its point is prescribed
+  ``travel(t)`` along the axis, and its force is the face contact's reaction.
 * **Water**: the buoyant weight ``(ρ − ρ_w) g`` below the water line and ``ρ g`` above it,
   per quadrature point at its rest height (as the small-strain truth).
 
@@ -275,8 +277,10 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     weight_n = float(np.abs(weight.force).sum())
 
     def solve(items, force_n: float) -> bool:
+        """One Newton solve with the bar's push ``force_n`` (N; a driven bar: the force scale of
+        its last reaction, for the tolerance)."""
         snapshot = u.values.copy()
-        step = fem.Step(items, ramp={bar: np.array([force_n])}, boundaries=boundaries)
+        step = fem.Step(items, ramp={bar: np.array([0.0 if driven else force_n])}, boundaries=boundaries)
         job = fem.Job([step], plugins=[fem.LinesearchPlugin()])
         try:
             tol_n = s.newton_tol * max(abs(force_n) + weight_n, 1e-9)
@@ -287,12 +291,28 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
         return True
 
     # frame 0: settled under gravity, the bar touching with no force
+    driven = False
     if not solve([elastic, weight, floor, face, bar], 0.0):
         raise InputError("the tissue does not settle on the floor under gravity", "vertices_mm")
     if viscous is not None:        # the viscosity's memory starts from the settled shape
         viscous.assemble.vector(field)
         viscous.results.update_statevars()
     items = [elastic] + ([viscous] if viscous is not None else []) + [weight, inertia, floor, face, bar]
+    at_rest = bar.displacement_mm().copy()
+
+    def reaction_n() -> float:
+        """The force (N) the tissue puts on the bar's face along its axis, at the current state."""
+        vector = face.assemble.vector(field)
+        vector = vector.toarray() if hasattr(vector, "toarray") else np.asarray(vector)
+        return float(vector.ravel()[bar.dofs] @ axis)
+
+    if problem.travel_mm is not None:
+        # travel control: the bar's point prescribed from where it rests (its own item, which
+        # balances a force, leaves the solve)
+        driven = True
+        items = items[:-1]
+        boundaries["bar"] = fem.Boundary(u, mask=np.arange(mesh.npoints) == bar_point, value=at_rest.copy())
+    last_reaction = 0.0
     inertia.rest()
     floor_y = floor_point[1] - touch                     # the floor's plane (the sample's lowest point at rest)
     face_at_rest = tip + (rest + touch) * axis           # the face's point before the bar moves
@@ -324,21 +344,26 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
                 if viscous is not None:
                     viscous.umat.kwargs["dtime_s"] = dt
                 inertia.start(dt)
-                if solve(items, float(problem.force_n(t + dt))):
+                if driven:
+                    boundaries["bar"].update(at_rest + float(problem.travel_mm(t + dt)) * axis)
+                push = last_reaction if driven else float(problem.force_n(t + dt))
+                if solve(items, push):
                     inertia.accept()
                     break
                 dt *= 0.5
                 stats["halvings"] += 1
             else:
                 raise InputError(f"the push does not converge at t = {t:.4g} s even in steps of {dt:.3g} s",
-                                 "force_n")
+                                 "travel_mm" if driven else "force_n")
             t += dt
             stats["steps"] += 1
+            if driven:
+                last_reaction = reaction_n()
         if np.any(np.isclose(times, target)):
             saved.append(u.values[:n_tissue].copy())
             frames.append(measure())
             advance.append(float(bar.displacement_mm() @ axis) - advance0)
-            force.append(float(problem.force_n(target)))
+            force.append(last_reaction if driven else float(problem.force_n(target)))
         if progress is not None:
             progress(min(t / times[-1], 1.0))
     displacement = np.zeros((len(saved), p2.dofs))
