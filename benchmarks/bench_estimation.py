@@ -214,9 +214,10 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
 
 def _tell(name: str, label: str, r: dict) -> None:
     v = r["physics"]["validation"]
+    fe = r["recovered"].get("force_over_youngs_m2")    # none for a driven bar: it pushed no force
+    fe_text = "" if fe is None else f"F/E {fe['rel_error']:+.0%}, "
     print(f"{name} {label}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm, "
-          f"F/E {r['recovered']['force_over_youngs_m2']['rel_error']:+.0%}, {r['calibration_s']:.0f} s",
-          file=sys.stderr, flush=True)
+          f"{fe_text}{r['calibration_s']:.0f} s", file=sys.stderr, flush=True)
 
 
 def search_comparison(reduced: dict, implicit: dict) -> dict:

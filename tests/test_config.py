@@ -127,3 +127,20 @@ def test_a_bar_is_driven_by_a_force_or_by_its_travel_and_the_other_schedule_is_r
     # the particle path's bar is pushed by a force: a driven one is refused by name, not run wrong
     with pytest.raises(InputError, match="bar.control"):
         build_scene(Scene(bar=bar))
+
+
+def test_setup_json_carries_a_driven_bars_travel_and_the_model_is_driven_by_it():
+    """A driven bar's stage program is the operator's to know: ``setup.json``'s push holds its
+    travel (not a force shape), and the bar the model is built with is driven by it."""
+    from hifumotion.observed.setup import PushSchedule
+    from hifumotion.particles.scene import BarConfig
+
+    push = PushSchedule(control="travel", shape="piecewise_linear", times_s=[0.0, 2.0, 6.0], travel_mm=[0.0, 1.0, 4.0])
+    bar = BarConfig(**push.schedule(0.3))
+    assert bar.control == "travel" and bar.travel_schedule()(4.0) == pytest.approx(2.5)
+    with pytest.raises(ValueError, match="must be a bar's stage|travel control needs"):
+        PushSchedule(control="travel", shape="ramp_hold", ramp_s=1.0)
+    with pytest.raises(ValueError, match="travel_mm is the schedule of a bar in travel control"):
+        PushSchedule(shape="piecewise_linear", times_s=[0.0, 1.0], relative_force=[0.0, 1.0], travel_mm=[0.0, 1.0])
+    with pytest.raises(ValueError, match="≥ 0 mm"):
+        PushSchedule(control="travel", shape="piecewise_linear", times_s=[0.0, 1.0], travel_mm=[0.0, -1.0])

@@ -257,6 +257,11 @@ def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:
         "beta1_over_youngs_s_pow": (k.beta1 / k.youngs_modulus_pa, truth["beta1_pa_s_pow"] / e),
         "poisson_ratio": (k.poisson_ratio, truth["poisson_ratio"]),
         "beta2": (k.beta2, truth["beta2"]),
+    } if truth.get("external_force_n") is not None else {
+        # a driven bar (travel control): no force was pushed, so there is no F/E to recover
+        "beta1_over_youngs_s_pow": (k.beta1 / k.youngs_modulus_pa, truth["beta1_pa_s_pow"] / e),
+        "poisson_ratio": (k.poisson_ratio, truth["poisson_ratio"]),
+        "beta2": (k.beta2, truth["beta2"]),
     }
     return {name: {"fit": fit, "truth": true, "rel_error": fit / true - 1, "std": report[name]["std"],
                    "determined": report[name]["determined"]} for name, (fit, true) in pairs.items()}

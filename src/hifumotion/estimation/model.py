@@ -106,7 +106,18 @@ class ModelSpec:
         return model
 
     def snapshot_scenes(self, k: "Parameters", last_frame: int) -> list:
-        """The scenes whose full runs make the reduced model around ``k`` (F/E × ``reduced_span``)."""
+        """The scenes whose full runs make the reduced model around ``k`` (F/E × ``reduced_span``;
+        a driven bar's travel × ``reduced_span``, so that the modes see shallower and deeper pushes)."""
+        if self.scene.bar.control == "travel":
+            scenes = []
+            for f in self.settings.reduced_span:
+                scene = scene_for(self, k, last_frame)
+                bar = scene.bar
+                scene.bar = bar.model_copy(update={"travel_mm": bar.travel_mm * f, "schedule_travel_mm": None if
+                                                   bar.schedule_travel_mm is None else
+                                                   [x * f for x in bar.schedule_travel_mm]})
+                scenes.append(scene)
+            return scenes
         return [scene_for(self, k.replaced(force_n=k.force_n * f), last_frame) for f in self.settings.reduced_span]
 
     def adopt_reduced(self, k: "Parameters", last_frame: int, runs: list) -> object:
@@ -210,8 +221,9 @@ def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
     scene.tissue.poisson_ratio = k.poisson_ratio
     scene.tissue.beta1 = k.beta1
     scene.tissue.beta2 = k.beta2
-    if scene.bar.schedule_force_n is not None:
-        # a known shape, an unknown magnitude: the schedule scales with the fitted peak
+    if scene.bar.control == "force" and scene.bar.schedule_force_n is not None:
+        # a known shape, an unknown magnitude: the schedule scales with the fitted peak (a driven
+        # bar's travel is known: its force is a result, F is no parameter of its runs)
         peak = max(scene.bar.schedule_force_n)
         scene.bar.schedule_force_n = [f * k.force_n / peak for f in scene.bar.schedule_force_n]
     scene.bar.force_n = k.force_n

@@ -103,6 +103,9 @@ def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
     p = cfg.protocol
     if p.name == "custom":
         return cfg
+    if cfg.bar.control == "travel":
+        raise InputError(f"protocol {p.name!r} pushes its bar by a force; a bar in travel control takes its "
+                         "schedule from [bar] (protocol.name = custom)", "bar.control")
     bar = cfg.bar.model_dump()
     peak = p.peak_force_n if p.peak_force_n is not None else cfg.bar.force_n
     end = (cfg.imaging.frames - 1) / cfg.imaging.frame_rate_hz

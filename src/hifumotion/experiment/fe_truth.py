@@ -23,10 +23,11 @@ from hifumotion.reference.creep_fe import CreepFESettings, CreepFESolution, Cree
 
 
 def bar_schedule(bar) -> tuple[Callable[[float], float], tuple[float, ...]]:
-    """The bar's push F(t) (N) and its breakpoints (s), its weight added when not supported."""
+    """The bar's push F(t) (N) and its breakpoints (s); no push for a driven bar (its travel is given)."""
+    if bar.control == "travel":
+        return (lambda t: 0.0), bar.breakpoints_s()
     schedule = bar.schedule()
-    breaks = tuple(bar.schedule_times_s) if bar.schedule_times_s is not None else ((bar.ramp_s,) if bar.ramp_s > 0 else ())
-    return (lambda t: max(float(schedule(t)), 0.0)), breaks
+    return (lambda t: max(float(schedule(t)), 0.0)), bar.breakpoints_s()
 
 
 def fe_problem(cfg, blob: Blob, placement_mm: np.ndarray) -> tuple[CreepingTissue, np.ndarray]:
@@ -46,7 +47,11 @@ def fe_problem(cfg, blob: Blob, placement_mm: np.ndarray) -> tuple[CreepingTissu
         centre = 0.5 * (vertices.min(0) + vertices.max(0))
         tip = centre - axis * (np.ptp(vertices, axis=0).max() + cfg.bar.radius_mm)
     force, breaks = bar_schedule(cfg.bar)
-    if not cfg.bar.weight_supported:
+    travel = None
+    if cfg.bar.control == "travel":
+        travel_mm = cfg.bar.travel_schedule()
+        travel = lambda t: float(travel_mm(t))  # noqa: E731
+    elif not cfg.bar.weight_supported:
         volume = math.pi * (cfg.bar.radius_mm * 1e-3) ** 2 * cfg.bar.length_mm * 1e-3
         wet = cfg.tank.water_depth_mm > 0
         rho = cfg.bar.density_kg_m3 - (cfg.physics.water_density_kg_m3 if wet else 0.0)
@@ -60,7 +65,7 @@ def fe_problem(cfg, blob: Blob, placement_mm: np.ndarray) -> tuple[CreepingTissu
         density_kg_m3=t.density_kg_m3, water_density_kg_m3=cfg.physics.water_density_kg_m3,
         water_line_mm=cfg.tank.water_depth_mm if cfg.tank.water_depth_mm > 0 else None,
         gravity_m_s2=cfg.physics.gravity_m_s2, floor_friction=cfg.physics.friction,
-        bar_friction=cfg.physics.friction, max_volume_mm3=cfg.truth.max_volume_mm3)
+        bar_friction=cfg.physics.friction, max_volume_mm3=cfg.truth.max_volume_mm3, travel_mm=travel)
     return problem, lift
 
 
@@ -94,8 +99,10 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
         kind = "finite_strain (P2 tetrahedra on FElupe: neo-Hooke, Eq. 16 viscosity, backward Euler, Coulomb contacts)"
         physical = physicality(solution.stats, spacing_mm)
         if physical["inverted_elements"]:
+            driven = cfg.bar.control == "travel"
             raise InputError(f"the push inverts the tissue (smallest volume ratio J = "
-                             f"{physical['smallest_jacobian']:.3g}): lower the bar's force", "bar.force_n")
+                             f"{physical['smallest_jacobian']:.3g}): lower the bar's {'travel' if driven else 'force'}",
+                             "bar.travel_mm" if driven else "bar.force_n")
     else:
         solution = creep_reference(problem, times, CreepFESettings(tolerance_mm=cfg.truth.tolerance_mm), progress)
         kind = "finite_elements (P2 tetrahedra, BDF2, Coulomb contacts)"

@@ -105,6 +105,12 @@ def truth_scene(cfg: TwinConfig, particles_csv: Path, spacing_mm: float, height_
 def push_shape(bar, protocol=None) -> PushSchedule:
     """The shape of the bar's schedule, for ``setup.json`` (its magnitude is not the operator's to know;
     nor, under ``push_change``, the change: only the ramp and hold announced)."""
+    if bar.control == "travel":
+        # a driven bar: its stage's program is the operator's to know, the force it takes is not
+        times = list(bar.schedule_times_s) if bar.schedule_times_s is not None else [0.0, max(bar.ramp_s, 1e-9)]
+        travel = bar.travel_schedule()
+        return PushSchedule(control="travel", shape="piecewise_linear", times_s=times,
+                            travel_mm=[float(travel(t)) for t in times])
     if bar.schedule_times_s is None or (protocol is not None and protocol.name == "push_change"):
         return PushSchedule(shape="ramp_hold", ramp_s=bar.ramp_s)
     peak = max(bar.schedule_force_n)
@@ -392,9 +398,11 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     write_contours_csv(tru / "sweep_contours.csv", _contours(sweep_secs, px, range(len(probe.sweep_z_mm))))
     np.savez_compressed(tru / "tissue_trajectory.npz", times_s=times, positions_mm=sim.tissue_mm.astype(np.float32),
                         volumes_mm3=vol, spacing_mm=dx)
-    schedule = scene.bar.schedule()
+    # the force on the bar: its schedule, or (a driven bar) what the truth's contacts took
+    forces = (np.asarray(sim.facts["bar_force_n"], float) if scene.bar.control == "travel"
+              else np.array([scene.bar.schedule()(t) for t in times]))
     _write_csv(tru / "bar_pose.csv", ["frame", "time_s", "centre_x_mm", "centre_y_mm", "centre_z_mm", "force_n"],
-               ([k, f"{t:.6g}", *(f"{c:.6f}" for c in sim.bar_centre_mm[k]), f"{schedule(t):.6g}"]
+               ([k, f"{t:.6g}", *(f"{c:.6f}" for c in sim.bar_centre_mm[k]), f"{forces[k]:.6g}"]
                 for k, t in enumerate(times)))
     system = sim.system
     motion = motion_summary(frame_masks, px, times, sim.tissue_mm, dx, cfg.tank.size_mm)
@@ -403,7 +411,11 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
              "model_tissue_particles": cfg.resolution.model_tissue_particles}
     parameters = {
         "description": "The true parameters of the synthetic experiment (SI unless the name says otherwise).",
-        "external_force_n": cfg.bar.force_n, "force_ramp_s": cfg.bar.ramp_s,
+        "bar_control": cfg.bar.control,
+        # a driven bar's force is a result (bar_pose.csv), not a parameter
+        "external_force_n": cfg.bar.force_n if cfg.bar.control == "force" else None, "force_ramp_s": cfg.bar.ramp_s,
+        **({"bar_travel_mm": cfg.bar.travel_mm, "bar_schedule_travel_mm": cfg.bar.schedule_travel_mm,
+            "bar_schedule_times_s": cfg.bar.schedule_times_s} if cfg.bar.control == "travel" else {}),
         "force_direction": axis.tolist(),
         "youngs_modulus_pa": cfg.tissue.youngs_modulus_pa, "poisson_ratio": cfg.tissue.poisson_ratio,
         "beta1_pa_s_pow": cfg.tissue.beta1, "beta2": cfg.tissue.beta2,

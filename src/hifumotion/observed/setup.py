@@ -87,27 +87,46 @@ class BarSetup(ConfigModel):
 
 
 class PushSchedule(ConfigModel):
-    """The shape of the force's schedule (its magnitude is what the estimation finds)."""
+    """The push's schedule: the shape of its force (its magnitude is what the estimation finds)
+    or, for a bar driven in travel control, its travel itself (the stage's program: known)."""
 
-    shape: Literal["ramp_hold", "piecewise_linear"] = Field("ramp_hold", description="ramp_hold: a linear rise over ramp_s, then held; piecewise_linear: the force at times_s is relative_force × its unknown peak, linear in between")
+    control: Literal["force", "travel"] = Field("force", description="force: the bar pushes with a force of known shape and unknown size; travel: the bar is driven along its axis by travel_mm at times_s (its force is a result)")
+    shape: Literal["ramp_hold", "piecewise_linear"] = Field("ramp_hold", description="ramp_hold: a linear rise over ramp_s, then held; piecewise_linear: the force at times_s is relative_force × its unknown peak (travel control: the travel is travel_mm), linear in between")
     ramp_s: float = Field(0.0, ge=0, description="duration of the rise (s)")
     times_s: list[float] | None = Field(None, description="piecewise_linear: the schedule's times (s), increasing")
-    relative_force: list[float] | None = Field(None, description="piecewise_linear: the force at each time over the peak force (0 … 1)")
+    relative_force: list[float] | None = Field(None, description="piecewise_linear, force control: the force at each time over the peak force (0 … 1)")
+    travel_mm: list[float] | None = Field(None, description="travel control: the bar's travel along its axis at each of times_s, in mm (≥ 0), from where it rests on the settled tissue")
 
     @model_validator(mode="after")
     def _piecewise(self):
+        if self.control == "travel":
+            if self.shape != "piecewise_linear" or self.times_s is None or self.travel_mm is None \
+                    or len(self.times_s) != len(self.travel_mm) or len(self.times_s) < 2:
+                raise ValueError("travel control needs shape piecewise_linear with times_s and travel_mm of the "
+                                 "same length (≥ 2)")
+            if any(not (x >= 0) for x in self.travel_mm):
+                raise ValueError("travel_mm must be ≥ 0 mm: the bar pushes, it does not pull")
+        elif self.travel_mm is not None:
+            raise ValueError("travel_mm is the schedule of a bar in travel control (control = travel)")
         if self.shape == "piecewise_linear":
-            if self.times_s is None or self.relative_force is None or len(self.times_s) != len(self.relative_force) \
-                    or len(self.times_s) < 2:
-                raise ValueError("piecewise_linear needs times_s and relative_force of the same length (≥ 2)")
+            if self.times_s is None or len(self.times_s) < 2:
+                raise ValueError("piecewise_linear needs times_s (≥ 2)")
             if any(b <= a for a, b in zip(self.times_s, self.times_s[1:])):
                 raise ValueError("times_s must increase")
+        if self.shape == "piecewise_linear" and self.control == "force":
+            if self.relative_force is None or len(self.times_s) != len(self.relative_force):
+                raise ValueError("piecewise_linear needs times_s and relative_force of the same length (≥ 2)")
             if any(not 0.0 <= f <= 1.0 for f in self.relative_force) or max(self.relative_force) <= 0:
                 raise ValueError("relative_force must lie in 0 … 1 with a positive peak")
         return self
 
     def schedule(self, peak_force_n: float) -> dict:
-        """The :class:`~hifumotion.particles.scene.BarConfig` fields of this shape at ``peak_force_n``."""
+        """The :class:`~hifumotion.particles.scene.BarConfig` fields of this shape at ``peak_force_n``
+        (travel control: the travel itself; no force is read)."""
+        if self.control == "travel":
+            return {"control": "travel", "schedule_times_s": list(self.times_s),
+                    "schedule_travel_mm": list(self.travel_mm), "schedule_force_n": None, "ramp_s": 0.0,
+                    "force_n": peak_force_n}
         if self.shape == "piecewise_linear":
             return {"schedule_times_s": list(self.times_s),
                     "schedule_force_n": [peak_force_n * f for f in self.relative_force],

@@ -117,7 +117,9 @@ def _parameter_parts(outcome) -> list[str]:
         e = truth["youngs_modulus_pa"]
         truth_values = {"external_force_n": truth["external_force_n"], "youngs_modulus_pa": e,
                         "poisson_ratio": truth["poisson_ratio"], "beta1_pa_s_pow": truth["beta1_pa_s_pow"],
-                        "beta2": truth["beta2"], "force_over_youngs_m2": truth["external_force_n"] / e,
+                        "beta2": truth["beta2"],
+                        "force_over_youngs_m2": (None if truth["external_force_n"] is None
+                                                 else truth["external_force_n"] / e),
                         "beta1_over_youngs_s_pow": truth["beta1_pa_s_pow"] / e}
     rows = []
     for key, label, unit in PARAMETER_ROWS:
