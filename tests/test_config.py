@@ -144,3 +144,20 @@ def test_setup_json_carries_a_driven_bars_travel_and_the_model_is_driven_by_it()
         PushSchedule(shape="piecewise_linear", times_s=[0.0, 1.0], relative_force=[0.0, 1.0], travel_mm=[0.0, 1.0])
     with pytest.raises(ValueError, match="≥ 0 mm"):
         PushSchedule(control="travel", shape="piecewise_linear", times_s=[0.0, 1.0], travel_mm=[0.0, -1.0])
+
+
+def test_driven_protocols_drive_the_bar_and_force_protocols_refuse_a_driven_one():
+    from hifumotion.experiment.config import twin_config
+
+    slide = twin_config("slide", {"protocol": {"peak_travel_mm": 4.0, "angle_deg": 30.0}})
+    end = (slide.imaging.frames - 1) / slide.imaging.frame_rate_hz
+    assert slide.bar.control == "travel" and slide.truth.solver == "finite_strain"
+    assert slide.bar.travel_schedule()(end / 2) == pytest.approx(2.0)
+    assert slide.bar.direction[0] == pytest.approx(0.5) and slide.bar.direction[1] == pytest.approx(-(3 ** 0.5) / 2)
+    back = twin_config("drive_release", {"protocol": {"peak_travel_mm": 2.0, "ramp_s": 1.0, "hold_s": 3.0}})
+    travel = back.bar.travel_schedule()
+    assert [travel(t) for t in (0.5, 2.0, 4.5, 6.0)] == pytest.approx([1.0, 2.0, 1.0, 0.0])
+    with pytest.raises(InputError, match="bar.control"):
+        twin_config("paper", {"bar": {"control": "travel", "travel_mm": 2.0}})
+    with pytest.raises(InputError, match="protocol.hold_s"):
+        twin_config("drive_release", {"protocol": {"hold_s": 20.0}})

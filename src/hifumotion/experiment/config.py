@@ -86,11 +86,12 @@ class TruthConfig(ConfigModel):
 class ProtocolConfig(ConfigModel):
     """How the bar pushes; sets the bar's schedule and direction (the preset names a therapy's protocol)."""
 
-    name: Literal["paper", "slow_push", "push_release", "oblique", "push_change", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; push_change: ramp then held, then the operator raises, lowers or lifts the push unannounced (setup.json tells only the ramp and hold); custom: the [bar] section as given")
+    name: Literal["paper", "slow_push", "push_release", "oblique", "push_change", "slide", "drive_release", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; push_change: ramp then held, then the operator raises, lowers or lifts the push unannounced (setup.json tells only the ramp and hold); slide: the bar, tilted by angle_deg, driven along its axis at a steady rate over the whole run (travel control: the sample slides on the floor); drive_release: the bar driven in over ramp_s, held hold_s, drawn back over ramp_s (travel control: the tissue recovers); custom: the [bar] section as given")
     peak_force_n: float | None = Field(None, gt=0, description="the largest force in N (default: bar.force_n)")
+    peak_travel_mm: float | None = Field(None, gt=0, description="slide, drive_release: the bar's largest travel along its axis in mm (default: bar.travel_mm)")
     ramp_s: float | None = Field(None, ge=0, description="paper/oblique/push_release: duration of the rise in s (default: bar.ramp_s; push_release: 1.5 s)")
     hold_s: float = Field(3.0, ge=0, description="push_release: time held at the peak in s")
-    angle_deg: float = Field(25.0, ge=0, lt=60, description="oblique: tilt of the bar from the vertical in degrees (in the x–y plane, pushing towards +x)")
+    angle_deg: float = Field(25.0, ge=0, lt=60, description="oblique, slide: tilt of the bar from the vertical in degrees (in the x–y plane, pushing towards +x)")
     change_at_s: float | None = Field(None, gt=0, description="push_change: when the push starts to change, in s (default: 60 % of the run, after the paper's training frames)")
     change_factor: float = Field(1.6, ge=0, le=5, description="push_change: the force after the change over the force before (0: the bar lifted; below 1: lowered; above 1: raised)")
     change_ramp_s: float = Field(0.3, ge=0, description="push_change: how long the change takes, in s")
@@ -103,12 +104,15 @@ def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
     p = cfg.protocol
     if p.name == "custom":
         return cfg
+    end = (cfg.imaging.frames - 1) / cfg.imaging.frame_rate_hz
+    if p.name in DRIVEN_PROTOCOLS:
+        return cfg.model_copy(update={"bar": _driven_bar(cfg, p, end)})
     if cfg.bar.control == "travel":
         raise InputError(f"protocol {p.name!r} pushes its bar by a force; a bar in travel control takes its "
-                         "schedule from [bar] (protocol.name = custom)", "bar.control")
+                         f"schedule from [bar] (protocol.name = custom) or a driven protocol "
+                         f"({', '.join(DRIVEN_PROTOCOLS)})", "bar.control")
     bar = cfg.bar.model_dump()
     peak = p.peak_force_n if p.peak_force_n is not None else cfg.bar.force_n
-    end = (cfg.imaging.frames - 1) / cfg.imaging.frame_rate_hz
     bar.update(force_n=peak, schedule_times_s=None, schedule_force_n=None, direction=(0.0, -1.0, 0.0))
     if p.name in ("paper", "oblique"):
         bar["ramp_s"] = p.ramp_s if p.ramp_s is not None else cfg.bar.ramp_s
@@ -133,6 +137,33 @@ def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
         bar["direction"] = (math.sin(a), -math.cos(a), 0.0)
     bar = BarConfig(**bar)
     return cfg.model_copy(update={"bar": bar})
+
+
+#: protocols whose bar is driven (travel control, issue 41): its travel given, its force a result
+DRIVEN_PROTOCOLS = ("slide", "drive_release")
+
+
+def _driven_bar(cfg: "TwinConfig", p: ProtocolConfig, end_s: float) -> BarConfig:
+    """The bar of a driven protocol: its travel schedule and direction."""
+    import math
+
+    peak = p.peak_travel_mm if p.peak_travel_mm is not None else cfg.bar.travel_mm
+    if not peak > 0:
+        raise InputError("a driven protocol needs the bar's travel: set protocol.peak_travel_mm or bar.travel_mm (mm)",
+                         "protocol.peak_travel_mm")
+    bar = cfg.bar.model_dump()
+    bar.update(control="travel", travel_mm=peak, schedule_force_n=None, direction=(0.0, -1.0, 0.0))
+    if p.name == "slide":
+        a = math.radians(p.angle_deg)
+        bar.update(schedule_times_s=[0.0, end_s], schedule_travel_mm=[0.0, peak], direction=(math.sin(a), -math.cos(a), 0.0))
+    else:   # drive_release
+        ramp = p.ramp_s if p.ramp_s is not None else 1.5
+        up, down = ramp, ramp + p.hold_s
+        if not down + ramp <= end_s:
+            raise InputError(f"drive_release's rise, hold and return ({down + ramp:g} s) must fit in the run "
+                             f"({end_s:g} s)", "protocol.hold_s")
+        bar.update(schedule_times_s=[0.0, up, down, down + ramp], schedule_travel_mm=[0.0, peak, peak, 0.0])
+    return BarConfig(**bar)
 
 
 class TwinConfig(ConfigModel):
@@ -175,7 +206,13 @@ for _name, _extra in (("paper", {}), ("slow_push", {"peak_force_n": 1.0}), ("pus
                       ("oblique", {"peak_force_n": 0.5}), ("push_change", {"peak_force_n": 0.5})):
     PRESETS[_name] = {**PRESETS["demo"], "protocol": {"name": _name, **_extra}}
 
-Preset = Literal["default", "small", "demo", "paper", "slow_push", "push_release", "oblique", "push_change"]
+# the driven protocols (issue 41): millimetres of motion, so the finite-strain truth
+for _name, _extra in (("slide", {"peak_travel_mm": 5.0, "angle_deg": 35.0}),
+                      ("drive_release", {"peak_travel_mm": 3.0, "ramp_s": 2.0, "hold_s": 2.0})):
+    PRESETS[_name] = {**PRESETS["demo"], "protocol": {"name": _name, **_extra}, "truth": {"solver": "finite_strain"}}
+
+Preset = Literal["default", "small", "demo", "paper", "slow_push", "push_release", "oblique", "push_change", "slide",
+                 "drive_release"]
 
 
 def _merge(base: dict, extra: dict) -> dict:
