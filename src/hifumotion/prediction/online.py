@@ -223,6 +223,10 @@ class OnlineSession:
         self.dt = float(spec.frame_interval_s)
         self.pixel_mm = float(setup.pixel_mm)
         last = max(int(frames_expected or setup.frames) - 1, max(self.horizons) + 1)
+        if spec.scene.bar.enabled and spec.scene.bar.control == "travel":
+            # the filter corrects the size of a push; a driven bar's travel is known, its force a result
+            raise InputError("the online loop assimilates a pushed bar's force; a bar in travel control "
+                             "(setup.json push.control = travel) is not supported yet", "push.control")
         t0 = time.perf_counter()
         self.model = spec.reduced(k, last, progress=lambda f: tell("reduced model", f))
         self.construction_s = time.perf_counter() - t0
