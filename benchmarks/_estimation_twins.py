@@ -63,11 +63,40 @@ CASES: dict[str, tuple[str, dict]] = {
 }
 
 
+#: issue 41: twins whose bar is driven (travel control, finite-strain truth) so that they move
+#: millimetres in the validation window; not in the default run (each twin takes ~25 min to make)
+LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
+    "slide_s47": ("slide", {
+        "seed": 47,
+        "blob": {"size_mm": [29.0, 17.0, 23.0], "lobes": 5, "irregularity": 0.14},
+        "tissue": {"youngs_modulus_pa": 9000.0, "poisson_ratio": 0.47, "beta1": 1.5e5},
+        "bar": {"radius_mm": 6.0},
+        "physics": {"friction": 0.15},
+        "protocol": {"peak_travel_mm": 5.0, "angle_deg": 35.0},
+    }),
+    "slide_s48": ("slide", {
+        "seed": 48,
+        "blob": {"size_mm": [33.0, 19.0, 24.0], "lobes": 7, "irregularity": 0.10},
+        "tissue": {"youngs_modulus_pa": 14000.0, "poisson_ratio": 0.46, "beta1": 3.0e5, "beta2": 0.45},
+        "bar": {"radius_mm": 5.5},
+        "physics": {"friction": 0.1},
+        "protocol": {"peak_travel_mm": 6.0, "angle_deg": 30.0},
+    }),
+    "drive_release_s49": ("drive_release", {
+        "seed": 49,
+        "blob": {"size_mm": [27.0, 18.0, 22.0], "lobes": 4, "irregularity": 0.16},
+        "tissue": {"youngs_modulus_pa": 11000.0, "poisson_ratio": 0.45, "beta1": 2.0e5, "beta2": 0.55},
+        "bar": {"radius_mm": 6.5},
+        "protocol": {"peak_travel_mm": 4.0, "ramp_s": 3.0, "hold_s": 2.5},
+    }),
+}
+
+
 def case_config(name: str):
-    """The :class:`~hifumotion.experiment.config.TwinConfig` of case ``name``."""
+    """The :class:`~hifumotion.experiment.config.TwinConfig` of case ``name`` (either table)."""
     from hifumotion.experiment.config import twin_config
 
-    preset, overrides = CASES[name]
+    preset, overrides = {**CASES, **LARGE_MOTION_CASES}[name]
     return twin_config(preset, overrides)
 
 

@@ -185,7 +185,7 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
                               centre_mm=tuple(float(c) for c in (tissue.min(0) + tissue.max(0)) / 2))
     scene = Scene(tank=tank, tissue=tissue_cfg, bar=bar,
                   particles=ParticleConfig(spacing_mm=dx, support_factor=s.support_factor),
-                  physics=PhysicsConfig(),
+                  physics=PhysicsConfig(friction=s.friction),
                   run=RunConfig(duration_s=1.0, output_interval_s=observation.observed.frame_interval_s,
                                 mass_scaling=s.mass_scaling, cfl=s.cfl, max_step_s=s.max_step_s, write_vtu=False))
     contour = Contour.from_mask(observation.frame_masks[0], observation.pixel_mm)

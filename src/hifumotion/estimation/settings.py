@@ -44,6 +44,8 @@ class ModelSettings:
     force_ramp_s: Annotated[float, Ge(0)] | None = None  # the force's linear rise (s); default: setup.json's push.ramp_s
     tissue_density_kg_m3: Annotated[float, Gt(0)] = 1050.0
     rate_floor_per_s: Annotated[float, Gt(0)] = RATE_FLOOR_PER_S   # floor of the shear rate in Eq. 16's μ (1/s; hifumotion.rheology)
+    friction: Annotated[float, Ge(0)] = 0.5            # Coulomb friction of the tissue on the floor and the bar's face
+                                        # (the operator's estimate, not fitted; a sample that slides depends on it)
     contour_points: Annotated[int, Ge(8), Le(10_000)] = 64   # size of the point set A
     integrator: Literal["implicit", "explicit", "reduced"] = "implicit"  # one of INTEGRATORS: "implicit", the fast path (hifumotion.creep);
                                         # "explicit", Eq. 8–20 as the paper; "reduced", the fast path's
