@@ -88,7 +88,9 @@ def _twin_models(twin: Path, particles: int):
     offset_mm = round(measure_boundary_offset(imaging, "glcv", seed=7919).offset_mm, 3)
     observed, obs, train, *_ = observe(twin, "tracked", "speckle", offset_mm)
     p = json.loads((twin / "truth" / "parameters.json").read_text())
-    k = Parameters(p["external_force_n"], p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"])
+    # a driven bar (travel control) pushed no force: its runs do not read one, the nominal stands in
+    force = p["external_force_n"] if p["external_force_n"] is not None else Parameters().force_n
+    k = Parameters(force, p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"])
     set_threads(1)   # one core, as the targets and the calibration's workers
     implicit = model_spec(obs, ModelSettings(tissue_particles=particles))
     implicit.voxels()   # made once, shared by the reduced spec
