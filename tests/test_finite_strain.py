@@ -158,3 +158,17 @@ def test_tetra10_cells_put_each_midpoint_between_its_edges_vertices():
     cells, x = p2.tetra10_cells(), p2.points_m
     for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3))):
         assert np.allclose(x[cells[:, 4 + k]], 0.5 * (x[cells[:, i]] + x[cells[:, j]]), atol=1e-12)
+
+
+def test_a_twin_is_physical_only_within_the_contacts_limits_and_the_faces_rim():
+    """``facts.physicality``: penetration of floor or bar above 1 % of the spacing, a node held
+    more than a spacing beyond the face's rim, or an inverted element each make a twin unphysical."""
+    from hifumotion.experiment.fe_truth import physicality
+
+    ok = {"smallest_jacobian": 0.8, "largest_strain": 0.2, "floor_penetration_mm": 1e-4,
+          "face_penetration_mm": 0.019, "held_beyond_rim_mm": 1.9}
+    p = physicality(ok, 2.0)
+    assert p["penetration_within_limit"] and p["held_within_face"] and not p["inverted_elements"]
+    assert not physicality({**ok, "face_penetration_mm": 0.021}, 2.0)["penetration_within_limit"]
+    assert not physicality({**ok, "held_beyond_rim_mm": 2.1}, 2.0)["held_within_face"]
+    assert physicality({**ok, "smallest_jacobian": -0.1}, 2.0)["inverted_elements"]

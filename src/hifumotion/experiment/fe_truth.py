@@ -75,12 +75,16 @@ PENETRATION_OF_SPACING = 0.01
 
 def physicality(stats: dict, spacing_mm: float) -> dict:
     """A finite-strain truth's checks (issue 41): no inverted element (J > 0 at every
-    quadrature point of every frame), contacts within ``PENETRATION_OF_SPACING`` of the
-    particle spacing, and the largest strain the law was held to."""
+    quadrature point of every frame), no tissue node inside the floor or the bar by more than
+    ``PENETRATION_OF_SPACING`` of the particle spacing, no node held by the face's contact
+    plane more than a spacing beyond the face's rim (the plane is unbounded, the face a disc),
+    and the largest strain the law was held to."""
     penetration = max(stats["floor_penetration_mm"], stats["face_penetration_mm"])
+    rim = stats.get("held_beyond_rim_mm", 0.0)
     return {"smallest_jacobian": stats["smallest_jacobian"], "inverted_elements": bool(stats["smallest_jacobian"] <= 0.0),
             "largest_strain": stats["largest_strain"], "largest_penetration_mm": penetration,
-            "penetration_within_limit": bool(penetration <= PENETRATION_OF_SPACING * spacing_mm)}
+            "penetration_within_limit": bool(penetration <= PENETRATION_OF_SPACING * spacing_mm),
+            "held_beyond_rim_mm": rim, "held_within_face": bool(rim <= spacing_mm)}
 
 
 def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float, placement_mm: np.ndarray,

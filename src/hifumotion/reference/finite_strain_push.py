@@ -321,19 +321,29 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     floor_y = floor_point[1] - touch                     # the floor's plane (the sample's lowest point at rest)
     face_at_rest = tip + (rest + touch) * axis           # the face's point before the bar moves
 
+    contact_gap = 1e-3 * size      # a face node this close to the plane (mm) counts as held by it
+
     def measure() -> dict:
         """This frame's physicality (docs/decisions.md, issue 41): the smallest volume ratio J
-        and the largest principal strain |λ − 1| over the quadrature points, and how far the
-        tissue's nodes lie inside the floor and inside the bar's face (mm)."""
+        and the largest principal strain |λ − 1| over the quadrature points; how far the
+        tissue's nodes lie inside the floor and inside the bar — *any* node within the face's
+        radius of the moved axis, not only those the face contact was given at rest (a sample
+        that slides under the bar brings others); and how far beyond the face's rim the
+        contact plane holds a node (the contact's plane is unbounded, the bar's face is a disc)."""
         grad = field.extract(grad=True, add_identity=True)[0]
         c = np.einsum("kiqc,kjqc->qcij", grad, grad)
         stretch = np.sqrt(np.clip(np.linalg.eigvalsh(c), 0.0, None))
         x = mesh.points[:n_tissue] + u.values[:n_tissue]
         face = face_at_rest + bar.displacement_mm()
+        along = (x - face) @ axis
+        lateral = np.linalg.norm((x - face) - np.outer(along, axis), axis=1)
+        inside = (along < 0.0) & (lateral <= problem.radius_mm)
+        held = along[under_bar] <= contact_gap
         return {"smallest_jacobian": float(np.linalg.det(np.moveaxis(grad, (0, 1), (-2, -1))).min()),
                 "largest_strain": float(np.abs(stretch - 1.0).max()),
                 "floor_penetration_mm": float(max(0.0, floor_y - x[:, 1].min())),
-                "face_penetration_mm": float(max(0.0, -((x[under_bar] - face) @ axis).min()))}
+                "face_penetration_mm": float(max(0.0, -along[inside].min(initial=0.0))),
+                "held_beyond_rim_mm": float(max(0.0, (lateral[under_bar][held] - problem.radius_mm).max(initial=0.0)))}
 
     frames = [measure()]
     saved = [u.values[:n_tissue].copy()]
@@ -382,6 +392,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
                   "largest_strain": max(per_frame["largest_strain"]),
                   "floor_penetration_mm": max(per_frame["floor_penetration_mm"]),
                   "face_penetration_mm": max(per_frame["face_penetration_mm"]),
+                  "held_beyond_rim_mm": max(per_frame["held_beyond_rim_mm"]),
                   "frames": per_frame})
     return CreepFESolution(times, displacement, np.asarray(advance), np.asarray(force), stats, p2)
 
