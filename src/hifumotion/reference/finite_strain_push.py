@@ -50,7 +50,9 @@ class FiniteStrainSettings:
     tissue's mean stiffness at the contact points; the bar's face, which takes the whole push on
     a few nodes where the floor spreads the weight over many, ten times the floor's: at the
     floor's × 100 the small twin's face penetrated 0.023 mm, above 1 % of its spacing, and
-    × 1,000 moves the field by 3 %, docs/decisions.md), the elastic slip of a sticking contact
+    × 1,000 moves the field by 3 %, docs/decisions.md), how far beyond its radius a driven bar's
+    face takes contact candidates (this many times its largest travel: the sample it slides moves
+    under it — a face tilted 30° outruns its own travel by 1.5 times), the elastic slip of a sticking contact
     (mm), and Newton's tolerance: the largest residual force (N) of a solve as a fraction of
     its push plus the tissue's weight. At 10⁻² the push's field is within 0.2 % of FElupe's
     own measure at 10⁻⁴ (which bounded the residual by ~3 % of the push) and the settle under
@@ -61,12 +63,14 @@ class FiniteStrainSettings:
     step_s: float = 0.05
     contact_multiplier: float = 100.0
     face_contact_multiplier: float = 1000.0
+    face_reach_factor: float = 2.0
     elastic_slip_mm: float | None = 0.005
     newton_tol: float = 1e-2
     max_halvings: int = 8
 
     def __post_init__(self):
-        for name in ("step_s", "contact_multiplier", "face_contact_multiplier", "elastic_slip_mm", "newton_tol"):
+        for name in ("step_s", "contact_multiplier", "face_contact_multiplier", "face_reach_factor", "elastic_slip_mm",
+                     "newton_tol"):
             value = getattr(self, name)
             if value is None and name == "elastic_slip_mm":
                 continue
@@ -246,13 +250,23 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     surface = np.flatnonzero(p2.on_surface)
     rel = points[surface] - tip
     lateral = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)
-    under_bar = surface[lateral <= problem.radius_mm]
-    if len(under_bar) == 0:
+    footprint = surface[lateral <= problem.radius_mm]
+    if len(footprint) == 0:
         raise InputError("no surface node lies under the bar's face", "tip_mm")
+    # the face's contact candidates: the nodes under it at rest and, for a driven bar, those its
+    # travel may slide under it (its contact plane is unbounded: facts.physicality checks that
+    # it holds none beyond the face's rim)
+    reach = 0.0
+    if problem.travel_mm is not None:
+        sampled = np.union1d(np.linspace(0.0, times[-1], 201), [b for b in problem.breakpoints_s if b <= times[-1]])
+        reach = s.face_reach_factor * max(float(problem.travel_mm(t)) for t in sampled)
+    near = surface[lateral <= problem.radius_mm + reach]
     # the face comes down along its axis to rest on the first node under it (as the
     # small-strain truth's): a bar whose tip starts millimetres away would take Newton's
     # steps of F/k to cross the gap
-    rest = float(((points[under_bar] - tip) @ axis).min())
+    rest = float(((points[footprint] - tip) @ axis).min())
+    # a candidate off the face's disc behind its plane at rest is not under the bar: left out
+    under_bar = np.union1d(footprint, near[(points[near] - tip) @ axis >= rest])
     # the rigid bodies' reference points, a hair inside the tissue so their contacts start active
     touch = 1e-6 * size
     floor_point = [points[:, 0].mean(), points[:, 1].min() + touch, points[:, 2].mean()]
