@@ -278,8 +278,14 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     elastic, viscous = law.bodies(field, s.step_s)
     floor = fem.ContactRigidPlane(field, surface, floor_index, normal=[0.0, 1.0, 0.0], friction=problem.floor_friction,
                                   multiplier=s.contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
-    face = fem.ContactRigidPlane(field, under_bar, bar_point, normal=axis, friction=problem.bar_friction,
-                                 multiplier=s.face_contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
+    def face_contact(nodes):
+        return fem.ContactRigidPlane(field, nodes, bar_point, normal=axis, friction=problem.bar_friction,
+                                     multiplier=s.face_contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
+
+    # the settle sees the nodes under the face at rest only (the plane is unbounded: the wider
+    # candidates of a driven bar, pressed while the tissue sinks, kept a sample from settling);
+    # the push sees every candidate
+    face = face_contact(footprint)
     # the tissue's stiffness under a punch of the bar's radius, 2 E a / (1 − ν²) (N/mm)
     punch = 2.0 * problem.youngs_modulus_pa * PA_TO_MPA * problem.radius_mm / (1.0 - problem.poisson_ratio ** 2)
     bar = _Bar(field, bar_point, axis, punch, face)
@@ -315,6 +321,9 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     if viscous is not None:        # the viscosity's memory starts from the settled shape
         viscous.assemble.vector(field)
         viscous.results.update_statevars()
+    if len(under_bar) > len(footprint):
+        face = face_contact(under_bar)
+        bar.contact = face
     items = [elastic] + ([viscous] if viscous is not None else []) + [weight, inertia, floor, face, bar]
     at_rest = bar.displacement_mm().copy()
 
