@@ -25,7 +25,16 @@ changes by the usual active-set rules (Wriggers, *Computational Contact Mechanic
   guessed friction made (it takes a zero one and the next round decides); one released
   within a step comes back in that step only if it crosses by ``left_tolerance_m`` (an
   edge node of a rough patch can otherwise chatter on and off the surface, as the FE
-  reference's rule has it).
+  reference's rule has it);
+* a contact of the bar that has slid beyond its face's rim is released: the face is a disc,
+  and a node held on its plane beyond the rim would be pushed by a face that is not there.
+
+The bar is a solid cylinder, not only its face: a node that comes inside it nearer its side
+than its face — tissue beside the rim, behind the face's plane, that the sliding sample
+brings under the disc — touches the **side**, held on the cylinder's tangent plane where it
+touched (its own normal, radial; released when it pulls or comes out in front of the face).
+Held on the face instead, it would be moved the whole depth it is behind the face's plane in
+one step, by a force that grows as the step shrinks (docs/decisions.md, issue 41).
 
 A bonded plane (a clamp) holds its nodes rigidly: their tangential displacement is
 prescribed too (status STICK), and they are never released.
@@ -138,7 +147,8 @@ def _frames(normals: np.ndarray) -> np.ndarray:
 class ContactSet:
     """Which nodes touch which solid, stuck or slipping.
 
-    ``body[i]``: −1 free, ``0 … P−1`` the planes, ``P`` the punch; ``status[i]`` FREE,
+    ``body[i]``: −1 free, ``0 … P−1`` the planes, ``P`` the punch's face, ``P + 1`` its side
+    (:attr:`side_index`; each such contact has its own frame in ``node_frames``); ``status[i]`` FREE,
     STICK (held rigidly by a bonded plane) or SLIP (in frictional contact); ``anchor[i]``
     the displacement (m) its friction pulls it back to (module docstring); ``pressure[i]``
     its last normal reaction (N); ``fresh[i]``: touched, its first reaction not yet known.
@@ -157,15 +167,27 @@ class ContactSet:
         self.left = np.zeros(n, bool)   # released within the current step
         normals = [np.asarray(p.normal, float) for p in self.planes]
         if punch is not None:
-            normals.append(np.asarray(punch.axis, float))
+            # the face's frame, and a stand-in for the side's (its contacts' own are in node_frames)
+            normals += [np.asarray(punch.axis, float)] * 2
         self.body_frames = _frames(np.array(normals)) if normals else np.zeros((0, 3, 3))
-        self.friction = np.array([p.friction for p in self.planes] + ([punch.friction] if punch else []))
-        self.bonded = np.array([p.bonded for p in self.planes] + ([False] if punch else []), bool)
+        self.node_frames = np.zeros((n, 3, 3))
+        self.friction = np.array([p.friction for p in self.planes] + ([punch.friction] * 2 if punch else []))
+        self.bonded = np.array([p.bonded for p in self.planes] + ([False] * 2 if punch else []), bool)
         self.version = 0  # bumped whenever the constrained set changes
 
     @property
     def punch_index(self) -> int:
+        """The body index of the bar's face."""
         return len(self.planes)
+
+    @property
+    def side_index(self) -> int:
+        """The body index of the bar's side (the cylinder's wall)."""
+        return len(self.planes) + 1
+
+    def on_bar(self) -> np.ndarray:
+        """The nodes touching the bar, its face or its side."""
+        return np.flatnonzero((self.body == self.punch_index) | (self.body == self.side_index))
 
     def gaps(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Smallest signed gap (m) of every node to the solids and which solid (−1: none near)."""
@@ -177,17 +199,27 @@ class ContactSet:
             closer = g < best
             best[closer], which[closer] = g[closer], k
         if self.punch is not None:
-            along, under = self.under_face(u, advance_m)
-            under &= along < best
-            best[under], which[under] = along[under], self.punch_index
+            along, across = self._in_bar(u, advance_m)
+            radius = self.punch.radius_m
+            under = across <= radius
+            # inside the cylinder the nearer of its face and its side: the larger (less negative) gap
+            side = under & (along < 0.0) & (across - radius > along)
+            gap = np.where(side, across - radius, along)
+            under &= gap < best
+            best[under] = gap[under]
+            which[under] = np.where(side[under], self.side_index, self.punch_index)
         return best, which
 
-    def under_face(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
-        """Every node's distance (m) beyond the punch's face along its axis, and whether it is under the face."""
+    def _in_bar(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every node's distance (m) beyond the face's plane along the axis, and from the axis."""
         a = self.body_frames[self.punch_index, 0]
         rel = self.rest + u - (np.asarray(self.punch.tip_m) + advance_m * a)
         along = rel @ a
-        across = np.linalg.norm(rel - along[:, None] * a, axis=1)
+        return along, np.linalg.norm(rel - along[:, None] * a, axis=1)
+
+    def under_face(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every node's distance (m) beyond the punch's face along its axis, and whether it is under the face."""
+        along, across = self._in_bar(u, advance_m)
         return along, across <= self.punch.radius_m
 
     def prescribed_normal(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -203,6 +235,12 @@ class ContactSet:
             a = self.body_frames[self.punch_index, 0]
             const[on] = -(self.rest[nodes[on]] - np.asarray(self.punch.tip_m)) @ a
             coef[on] = 1.0
+            # the side: the tangent plane R from the axis along the node's own (radial) normal;
+            # the bar moves along its axis, across that normal, so s does not enter
+            side = np.flatnonzero(self.body[nodes] == self.side_index)
+            normal = self.node_frames[nodes[side], 0]
+            rel = self.rest[nodes[side]] - np.asarray(self.punch.tip_m)
+            const[side] = self.punch.radius_m - np.einsum("nk,nk->n", rel, normal)
         return const, coef
 
     def touch(self, nodes: np.ndarray, bodies: np.ndarray, u: np.ndarray) -> None:
@@ -214,6 +252,15 @@ class ContactSet:
             mine = held & (self.body == b)
             self.pressure[nodes[bodies == b]] = self.pressure[mine].mean() if mine.any() else 0.0
         self.body[nodes] = bodies
+        side = nodes[bodies == self.side_index] if self.punch is not None else nodes[:0]
+        if len(side):
+            # the side's normal where the node touches it: radial, out of the bar
+            a = self.body_frames[self.punch_index, 0]
+            rel = self.rest[side] + u[side] - np.asarray(self.punch.tip_m)
+            radial = rel - (rel @ a)[:, None] * a
+            radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+            self.node_frames[side] = np.stack([radial, np.broadcast_to(a, radial.shape),
+                                               np.cross(radial, a)], axis=1)
         self.fresh[nodes] = True
         self.status[nodes] = np.where(self.bonded[bodies], STICK, SLIP)
         self.anchor[nodes] = u[nodes]
@@ -229,7 +276,12 @@ class ContactSet:
         self.version += 1
 
     def frames_of(self, nodes: np.ndarray) -> np.ndarray:
-        return self.body_frames[self.body[nodes]]
+        """``(m, 3, 3)`` contact frames of ``nodes`` (normal first): their body's, or their own on the bar's side."""
+        frames = self.body_frames[self.body[nodes]]
+        if self.punch is not None:
+            side = self.body[nodes] == self.side_index
+            frames[side] = self.node_frames[nodes[side]]
+        return frames
 
     def frictional(self) -> np.ndarray:
         """The contacts whose tangential motion meets friction (not bonded, μ_f > 0)."""
@@ -286,6 +338,18 @@ class ContactSet:
             if pulling.any():
                 self.release(contact[pulling])
                 self.left[contact[pulling]] = True
+                changed_set = True
+        if self.punch is not None:
+            # the face is a disc: a node slid beyond its rim has nothing to hold it (held on the
+            # face's plane it would be pushed by a face that is not there); one on the side that
+            # has come out in front of the face is beside the bar no more
+            along, under = self.under_face(u, advance_m)
+            on_face = self.body == self.punch_index
+            on_side = self.body == self.side_index
+            off = np.flatnonzero((on_face & ~under) | (on_side & (along > 0.0)))
+            if len(off):
+                self.release(off)
+                self.left[off] = True
                 changed_set = True
         gap, which = self.gaps(u, advance_m)
         gate = np.where(self.left, left_tolerance_m, tolerance_m)

@@ -441,7 +441,7 @@ class CreepSolver:
             # a bar with no push holds nothing: it rests on the tissue and follows it after each
             # solve (as the twin's truth, reference.creep_fe.follow); held with zero force it
             # would leave its advance to contacts whose reactions must sum to nothing (chatter)
-            self.contacts.release(np.flatnonzero(self.contacts.body == self.contacts.punch_index))
+            self.contacts.release(self.contacts.on_bar())
         a, c = self._matrices(dt, mu)
         base = self.body_force.ravel() + np.repeat(self.mass, 3) / dt ** 2 * (u + dt * v).ravel()
         if c is not None:
