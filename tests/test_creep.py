@@ -147,9 +147,10 @@ def test_fast_path_agrees_with_the_finite_element_reference():
     u_fast = sim.tissue_mm[-1] - mesh.centres_mm
     u_ref = ref.at(mesh.centres_mm)
     rms = math.sqrt(((u_fast - u_ref) ** 2).sum(1).mean())
-    # measured 0.14 of the peak at 2 mm (0.12 with the rigid stick/slip of before the elastic stick;
-    # benchmarks/bench_fe_reference.py: it falls as the spacing does)
-    assert rms <= 0.15 * np.linalg.norm(u_ref, axis=1).max()
+    # measured 0.154 of the peak at 2 mm: 0.14 with a sharp-edged bar, the reference's, and 0.154
+    # with the model's rim rounded at half a spacing (1 mm of the 6 mm bar here; docs/decisions.md,
+    # issue 41, session 27); benchmarks/bench_fe_reference.py: it falls as the spacing does
+    assert rms <= 0.16 * np.linalg.norm(u_ref, axis=1).max()
 
 
 def test_reference_uniaxial_box():

@@ -26,15 +26,20 @@ changes by the usual active-set rules (Wriggers, *Computational Contact Mechanic
   within a step comes back in that step only if it crosses by ``left_tolerance_m`` (an
   edge node of a rough patch can otherwise chatter on and off the surface, as the FE
   reference's rule has it);
-* a contact of the bar that has slid beyond its face's rim is released: the face is a disc,
-  and a node held on its plane beyond the rim would be pushed by a face that is not there.
 
-The bar is a solid cylinder, not only its face: a node that comes inside it nearer its side
-than its face — tissue beside the rim, behind the face's plane, that the sliding sample
-brings under the disc — touches the **side**, held on the cylinder's tangent plane where it
-touched (its own normal, radial; released when it pulls or comes out in front of the face).
-Held on the face instead, it would be moved the whole depth it is behind the face's plane in
-one step, by a force that grows as the step shrinks (docs/decisions.md, issue 41).
+The bar is a solid cylinder of ``radius_m`` whose end's edge is rounded (``edge_radius_m``,
+centred on the real edge): a flat face, a quarter-torus rim and a side. A node touches it where its signed distance to
+that solid is below the tolerance, and is held on the solid's **tangent plane where it
+touched** (its own normal ``n``), which the bar carries along its axis ``a``: its normal
+displacement is prescribed as ``const + (a·n) s``. At each step's end the tangent planes are
+taken again where the contacts now are (:meth:`ContactSet.refresh_bar`): a node that slides
+off the face turns over the rim onto the side, whose normal, across the axis, no longer
+pushes it. Why the whole solid and a rounded edge (docs/decisions.md, issue 41): a node
+held on the face's unbounded plane beyond the rim is pushed by a face that is not there;
+released there, tissue beside the rim that a sliding sample brings under the disc is
+already behind the face's plane, and held on it at once is moved that whole depth in one
+step, by a force that grows as the step shrinks; held on a sharp rim's side it hooks the
+sample. A rounded edge lets it pass under, as it does under a real bar.
 
 A bonded plane (a clamp) holds its nodes rigidly: their tangential displacement is
 prescribed too (status STICK), and they are never released.
@@ -114,7 +119,9 @@ class Plane:
 class Punch:
     """The bar's flat end: a disc of ``radius_m`` at ``tip_m``, pushed along unit ``axis``.
 
-    ``force_n(t)`` is the push (N) at time t (s); ``breakpoints_s`` the times where the
+    ``edge_radius_m``: the rim's rounding (m; None: the solver's, ``CreepSettings.bar_edge_spacings``
+    spacings — a voxel mesh cannot see a sharper edge). ``force_n(t)`` is the push (N) at time t (s);
+    ``breakpoints_s`` the times where the
     schedule bends (the integrator lands a step on each). With ``travel_m`` (travel control)
     the bar is driven instead: its end is ``travel_m(t)`` (m) along the axis beyond where it
     rests on the settled tissue, ``force_n`` is not read, and the force it takes is a result.
@@ -127,6 +134,7 @@ class Punch:
     friction: float = 0.5
     breakpoints_s: tuple[float, ...] = ()
     travel_m: Callable[[float], float] | None = None
+    edge_radius_m: float | None = None
 
     @property
     def driven(self) -> bool:
@@ -147,8 +155,9 @@ def _frames(normals: np.ndarray) -> np.ndarray:
 class ContactSet:
     """Which nodes touch which solid, stuck or slipping.
 
-    ``body[i]``: −1 free, ``0 … P−1`` the planes, ``P`` the punch's face, ``P + 1`` its side
-    (:attr:`side_index`; each such contact has its own frame in ``node_frames``); ``status[i]`` FREE,
+    ``body[i]``: −1 free, ``0 … P−1`` the planes, ``P`` the bar (each of its contacts has its own
+    tangent plane: frame ``node_frames[i]``, normal first, at ``node_offset[i]`` along it when
+    the bar's advance is 0); ``status[i]`` FREE,
     STICK (held rigidly by a bonded plane) or SLIP (in frictional contact); ``anchor[i]``
     the displacement (m) its friction pulls it back to (module docstring); ``pressure[i]``
     its last normal reaction (N); ``fresh[i]``: touched, its first reaction not yet known.
@@ -167,27 +176,30 @@ class ContactSet:
         self.left = np.zeros(n, bool)   # released within the current step
         normals = [np.asarray(p.normal, float) for p in self.planes]
         if punch is not None:
-            # the face's frame, and a stand-in for the side's (its contacts' own are in node_frames)
-            normals += [np.asarray(punch.axis, float)] * 2
+            normals.append(np.asarray(punch.axis, float))
+            if punch.edge_radius_m is None or not 0.0 <= punch.edge_radius_m <= punch.radius_m:
+                raise ValueError("the bar's edge radius must be set, between 0 and its radius")
         self.body_frames = _frames(np.array(normals)) if normals else np.zeros((0, 3, 3))
         self.node_frames = np.zeros((n, 3, 3))
-        self.friction = np.array([p.friction for p in self.planes] + ([punch.friction] * 2 if punch else []))
-        self.bonded = np.array([p.bonded for p in self.planes] + ([False] * 2 if punch else []), bool)
+        self.node_offset = np.zeros(n)
+        self.friction = np.array([p.friction for p in self.planes] + ([punch.friction] if punch else []))
+        self.bonded = np.array([p.bonded for p in self.planes] + ([False] if punch else []), bool)
         self.version = 0  # bumped whenever the constrained set changes
 
     @property
     def punch_index(self) -> int:
-        """The body index of the bar's face."""
+        """The body index of the bar."""
         return len(self.planes)
 
-    @property
-    def side_index(self) -> int:
-        """The body index of the bar's side (the cylinder's wall)."""
-        return len(self.planes) + 1
-
     def on_bar(self) -> np.ndarray:
-        """The nodes touching the bar, its face or its side."""
-        return np.flatnonzero((self.body == self.punch_index) | (self.body == self.side_index))
+        """The nodes touching the bar."""
+        return np.flatnonzero(self.body == self.punch_index)
+
+    def bar_force(self) -> float:
+        """The force (N) the bar takes along its axis: its contacts' normal reactions, each times a·n."""
+        nodes = self.on_bar()
+        axis = self.body_frames[self.punch_index, 0]
+        return float(self.pressure[nodes] @ (self.node_frames[nodes, 0] @ axis))
 
     def gaps(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Smallest signed gap (m) of every node to the solids and which solid (−1: none near)."""
@@ -199,28 +211,53 @@ class ContactSet:
             closer = g < best
             best[closer], which[closer] = g[closer], k
         if self.punch is not None:
-            along, across = self._in_bar(u, advance_m)
-            radius = self.punch.radius_m
-            under = across <= radius
-            # inside the cylinder the nearer of its face and its side: the larger (less negative) gap
-            side = under & (along < 0.0) & (across - radius > along)
-            gap = np.where(side, across - radius, along)
-            under &= gap < best
-            best[under] = gap[under]
-            which[under] = np.where(side[under], self.side_index, self.punch_index)
+            gap, _ = self.bar_distance(self.rest + u, advance_m)
+            closer = gap < best
+            best[closer], which[closer] = gap[closer], self.punch_index
         return best, which
 
-    def _in_bar(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
-        """Every node's distance (m) beyond the face's plane along the axis, and from the axis."""
+    def _in_bar(self, x_m: np.ndarray, advance_m: float):
+        """Positions ``x_m`` (m) relative to the bar: along its axis beyond the face's plane, from
+        the axis (m), and the unit radial direction (any unit vector across the axis on it)."""
         a = self.body_frames[self.punch_index, 0]
-        rel = self.rest + u - (np.asarray(self.punch.tip_m) + advance_m * a)
+        rel = x_m - (np.asarray(self.punch.tip_m) + advance_m * a)
         along = rel @ a
-        return along, np.linalg.norm(rel - along[:, None] * a, axis=1)
+        lateral = rel - along[:, None] * a
+        across = np.linalg.norm(lateral, axis=1)
+        on_axis = across < 1e-300
+        radial = np.where(on_axis[:, None], self.body_frames[self.punch_index, 1],
+                          lateral / np.where(on_axis, 1.0, across)[:, None])
+        return along, across, radial
+
+    def bar_distance(self, x_m: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance (m; negative inside) of positions ``x_m`` (m) to the bar, and its
+        outward unit normal there: the solid is a cylinder of radius R − r/2 whose face is r behind
+        the real one, grown by a ball of radius r — a flat face to R − r/2, a rim rounded at r
+        centred on the real one (the face neither shrunk nor grown on average), a side at R + r/2."""
+        a = self.body_frames[self.punch_index, 0]
+        r = float(self.punch.edge_radius_m)
+        along, across, radial = self._in_bar(x_m, advance_m)
+        front = along + r                        # beyond the core's face
+        out = across - (self.punch.radius_m - 0.5 * r)  # beyond the core's side
+        rim = (out > 0) & (front > 0)
+        corner = np.hypot(out, front)
+        inside = (out <= 0) & (front <= 0)
+        beside = (out > 0) & (front <= 0)
+        distance = np.where(rim, corner, np.where(beside, out, np.where(inside, np.maximum(front, out), front)))
+        radial_normal = beside | (inside & (out > front))
+        normal = np.where(radial_normal[:, None], radial, a)
+        if rim.any():
+            normal[rim] = (out[rim, None] * radial[rim] + front[rim, None] * a) / corner[rim, None]
+        return distance - r, normal
 
     def under_face(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
-        """Every node's distance (m) beyond the punch's face along its axis, and whether it is under the face."""
-        along, across = self._in_bar(u, advance_m)
-        return along, across <= self.punch.radius_m
+        """How far (m) the bar must advance along its axis to touch each node (its gap along the
+        axis to the face or the rounded rim), and whether the node is under the bar at all."""
+        along, across, _ = self._in_bar(self.rest + u, advance_m)
+        r = float(self.punch.edge_radius_m)
+        out = np.clip(across - (self.punch.radius_m - 0.5 * r), 0.0, r)
+        # the rim recedes behind the face's plane by r − √(r² − out²)
+        return along + r - np.sqrt(r * r - out * out), across <= self.punch.radius_m + 0.5 * r
 
     def prescribed_normal(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For contact nodes: the normal displacement that closes their gap, as
@@ -231,20 +268,15 @@ class ContactSet:
             on = self.body[nodes] == k
             const[on] = -(self.rest[nodes[on]] - np.asarray(plane.point_m)) @ self.body_frames[k, 0]
         if self.punch is not None:
-            on = self.body[nodes] == self.punch_index
-            a = self.body_frames[self.punch_index, 0]
-            const[on] = -(self.rest[nodes[on]] - np.asarray(self.punch.tip_m)) @ a
-            coef[on] = 1.0
-            # the side: the tangent plane R from the axis along the node's own (radial) normal;
-            # the bar moves along its axis, across that normal, so s does not enter
-            side = np.flatnonzero(self.body[nodes] == self.side_index)
-            normal = self.node_frames[nodes[side], 0]
-            rel = self.rest[nodes[side]] - np.asarray(self.punch.tip_m)
-            const[side] = self.punch.radius_m - np.einsum("nk,nk->n", rel, normal)
+            # the tangent plane where the node touched, carried along the axis: n·x = offset + (a·n) s
+            on = np.flatnonzero(self.body[nodes] == self.punch_index)
+            normal = self.node_frames[nodes[on], 0]
+            const[on] = self.node_offset[nodes[on]] - np.einsum("nk,nk->n", self.rest[nodes[on]], normal)
+            coef[on] = normal @ self.body_frames[self.punch_index, 0]
         return const, coef
 
-    def touch(self, nodes: np.ndarray, bodies: np.ndarray, u: np.ndarray) -> None:
-        """Make ``nodes`` contacts of ``bodies``, anchored where they are now."""
+    def touch(self, nodes: np.ndarray, bodies: np.ndarray, u: np.ndarray, advance_m: float = 0.0) -> None:
+        """Make ``nodes`` contacts of ``bodies``, anchored where they are now (the bar at ``advance_m``)."""
         if len(nodes) == 0:
             return
         held = (self.body >= 0) & (self.pressure > 0)
@@ -252,19 +284,39 @@ class ContactSet:
             mine = held & (self.body == b)
             self.pressure[nodes[bodies == b]] = self.pressure[mine].mean() if mine.any() else 0.0
         self.body[nodes] = bodies
-        side = nodes[bodies == self.side_index] if self.punch is not None else nodes[:0]
-        if len(side):
-            # the side's normal where the node touches it: radial, out of the bar
-            a = self.body_frames[self.punch_index, 0]
-            rel = self.rest[side] + u[side] - np.asarray(self.punch.tip_m)
-            radial = rel - (rel @ a)[:, None] * a
-            radial /= np.linalg.norm(radial, axis=1, keepdims=True)
-            self.node_frames[side] = np.stack([radial, np.broadcast_to(a, radial.shape),
-                                               np.cross(radial, a)], axis=1)
+        if self.punch is not None:
+            self._tangent_planes(nodes[bodies == self.punch_index], u, advance_m)
         self.fresh[nodes] = True
         self.status[nodes] = np.where(self.bonded[bodies], STICK, SLIP)
         self.anchor[nodes] = u[nodes]
         self.version += 1
+
+    def _tangent_planes(self, nodes: np.ndarray, u: np.ndarray, advance_m: float) -> np.ndarray:
+        """The bar's tangent planes at its surface point nearest each of ``nodes`` (set in
+        ``node_frames`` and ``node_offset``); returns how far (rad) each normal turned."""
+        if len(nodes) == 0:
+            return np.zeros(0)
+        x = self.rest[nodes] + u[nodes]
+        gap, normal = self.bar_distance(x, advance_m)
+        turn = np.arccos(np.clip(np.einsum("nk,nk->n", normal, self.node_frames[nodes, 0]), -1.0, 1.0))
+        a = self.body_frames[self.punch_index, 0]
+        self.node_frames[nodes] = _frames(normal)
+        # the surface point x − gap n lies on the plane; at advance 0 the plane is (a·n) advance back
+        self.node_offset[nodes] = np.einsum("nk,nk->n", x, normal) - gap - advance_m * (normal @ a)
+        return turn
+
+    def refresh_bar(self, u: np.ndarray, advance_m: float, turn_rad: float = 1e-6) -> None:
+        """End of a step: each bar contact's tangent plane taken again where it now is (its
+        normal turned by more than ``turn_rad``: a node sliding over the rounded rim)."""
+        nodes = self.on_bar()
+        if len(nodes) == 0:
+            return
+        frames, offset = self.node_frames[nodes].copy(), self.node_offset[nodes].copy()
+        turned = self._tangent_planes(nodes, u, advance_m) > turn_rad
+        # the others keep their planes exactly (a face contact's never changes)
+        self.node_frames[nodes[~turned]], self.node_offset[nodes[~turned]] = frames[~turned], offset[~turned]
+        if turned.any():
+            self.version += 1
 
     def release(self, nodes: np.ndarray) -> None:
         if len(nodes) == 0:
@@ -276,11 +328,11 @@ class ContactSet:
         self.version += 1
 
     def frames_of(self, nodes: np.ndarray) -> np.ndarray:
-        """``(m, 3, 3)`` contact frames of ``nodes`` (normal first): their body's, or their own on the bar's side."""
+        """``(m, 3, 3)`` contact frames of ``nodes`` (normal first): their plane's, or their own on the bar."""
         frames = self.body_frames[self.body[nodes]]
         if self.punch is not None:
-            side = self.body[nodes] == self.side_index
-            frames[side] = self.node_frames[nodes[side]]
+            bar = self.body[nodes] == self.punch_index
+            frames[bar] = self.node_frames[nodes[bar]]
         return frames
 
     def frictional(self) -> np.ndarray:
@@ -339,23 +391,11 @@ class ContactSet:
                 self.release(contact[pulling])
                 self.left[contact[pulling]] = True
                 changed_set = True
-        if self.punch is not None:
-            # the face is a disc: a node slid beyond its rim has nothing to hold it (held on the
-            # face's plane it would be pushed by a face that is not there); one on the side that
-            # has come out in front of the face is beside the bar no more
-            along, under = self.under_face(u, advance_m)
-            on_face = self.body == self.punch_index
-            on_side = self.body == self.side_index
-            off = np.flatnonzero((on_face & ~under) | (on_side & (along > 0.0)))
-            if len(off):
-                self.release(off)
-                self.left[off] = True
-                changed_set = True
         gap, which = self.gaps(u, advance_m)
         gate = np.where(self.left, left_tolerance_m, tolerance_m)
         crossing = np.flatnonzero((self.body < 0) & (which >= 0) & (gap < -gate))
         if len(crossing):
-            self.touch(crossing, which[crossing], u)
+            self.touch(crossing, which[crossing], u, advance_m)
             changed_set = True
         return changed_set
 

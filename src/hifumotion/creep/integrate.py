@@ -38,7 +38,7 @@ to exactly that force; its uniform compression ρ_w g h / K is below 10⁻³ her
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -152,6 +152,9 @@ class CreepSolver:
         for c in range(3):
             np.add.at(self.body_force[:, c], mesh.elements.ravel(), np.repeat(weight * grav[c] / 8.0, 8))
         self.diag_index = np.flatnonzero(rows == self.assembly.indices)
+        if punch is not None and punch.edge_radius_m is None:
+            # the rim rounded at the mesh's resolution (contact.py: why the edge is rounded)
+            punch = replace(punch, edge_radius_m=min(self.settings.bar_edge_spacings * self.dx_m, punch.radius_m))
         self.contacts = ContactSet(self.rest_m, planes, punch)
         self.punch = punch
         self._fixed_pattern()
@@ -218,12 +221,13 @@ class CreepSolver:
                 cols.append(np.repeat(3 * contact[slip] + a, 3))
                 vals.append(frames[slip, a].ravel())
                 columns[contact[slip], :, a] = frames[slip, a]
+            # a bar's contact moves (a·n) s along its normal n as the bar advances s
             on_punch = np.flatnonzero(coef != 0)
-            bar_normal[contact[on_punch]] = frames[on_punch, 0]
+            bar_normal[contact[on_punch]] = coef[on_punch, None] * frames[on_punch, 0]
             if len(on_punch):
                 rows.append((3 * contact[on_punch][:, None] + np.arange(3)).ravel())
                 cols.append(np.full(3 * len(on_punch), s_col))
-                vals.append(frames[on_punch, 0].ravel())
+                vals.append(bar_normal[contact[on_punch]].ravel())
         size = 3 * n + (1 if s_col >= 0 else 0)
         if s_col >= 0 and (self._driven() or not np.any(cs.body == cs.punch_index)):
             # a bar touching nothing, or a driven one: its advance is no unknown of the tissue's
@@ -406,7 +410,7 @@ class CreepSolver:
         self.advance_m += reach
         # every node the face reaches together (a flat top meets it all at once)
         first = under[gap[under] <= reach + self.settings.contact_tolerance * self.dx_m]
-        cs.touch(first, np.full(len(first), cs.punch_index), u)
+        cs.touch(first, np.full(len(first), cs.punch_index), u, self.advance_m)
         # their share of the push until their reactions are known: the friction it allows holds
         # them from the first round (without it a body touched at a few points swings out of
         # place, and the next rounds' friction, lagging the normal reactions, does not bring it back)
@@ -473,11 +477,13 @@ class CreepSolver:
         self._place_bar(new, s, unloaded)
         cs.record_pressure((a @ new - base).reshape(-1, 3))
         cs.slide(unew, self.settings.stick_mm * MM)
+        taken = cs.bar_force() if self.punch is not None else 0.0
+        if self.punch is not None:   # after the force: its reactions are on the planes just solved
+            cs.refresh_bar(unew, self.advance_m)
         gap, which = cs.gaps(unew, self.advance_m)
         touching = cs.body >= 0
         worst = float(np.max(-gap[~touching], initial=0.0)) / MM
         self.stats["max_penetration_mm"] = max(self.stats["max_penetration_mm"], worst)
-        taken = float(cs.pressure[cs.body == cs.punch_index].sum()) if self.punch is not None else 0.0
         return unew, taken
 
     # -- the run ----------------------------------------------------------------------
@@ -530,7 +536,8 @@ class CreepSolver:
             mu = self.material.viscosity(rate)
             adv0 = self.advance_m
             version0 = cs.version
-            state = (cs.body.copy(), cs.status.copy(), cs.anchor.copy(), cs.pressure.copy(), cs.fresh.copy())
+            state = (cs.body.copy(), cs.status.copy(), cs.anchor.copy(), cs.pressure.copy(), cs.fresh.copy(),
+                     cs.node_frames.copy(), cs.node_offset.copy())
             unew, taken = self.step(u, v, t + dt, dt, mu)
             vnew = (unew - u) / dt
             err = 0.5 * dt * np.abs(vnew - v).max()
@@ -538,7 +545,7 @@ class CreepSolver:
                 # reject: restore the contact state and halve
                 self.stats["rejected"] += 1
                 changed = cs.version != version0
-                cs.body, cs.status, cs.anchor, cs.pressure, cs.fresh = state
+                cs.body, cs.status, cs.anchor, cs.pressure, cs.fresh, cs.node_frames, cs.node_offset = state
                 if changed:  # the set the factorisation knew is gone
                     cs.version += 1
                 self.advance_m = adv0

@@ -47,6 +47,10 @@ class CreepSettings:
         displacement from its anchor and slides beyond it. 10 µm, a hundredth of a
         spacing (the FE truth's is 1 µm): the same motion to 0.5 µm of its error against
         the truth, a third fewer solves (docs/decisions.md).
+    bar_edge_spacings
+        The bar's rim rounded at this many spacings (when its ``edge_radius_m`` is not given):
+        a voxel mesh cannot resolve a sharper edge, and a sharp one hooks a sliding sample
+        (:mod:`.contact`, docs/decisions.md).
     newton_rounds
         Rounds that linearise the friction by its tangent (Newton); later ones take the
         secant, which always settles.
@@ -67,6 +71,7 @@ class CreepSettings:
     round_rtol: Fraction = 1e-6
     friction_rtol: Fraction = 1e-3
     stick_mm: Positive = 1e-2
+    bar_edge_spacings: Annotated[float, Ge(0)] = 0.5
     newton_rounds: Annotated[int, Ge(0)] = 8
     solver: Literal["pardiso", "superlu"] | None = None
     precision: Literal["mixed", "double"] = "mixed"

@@ -31,6 +31,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.contour import Contour, resample_closed
+from hifumotion.errors import InputError
 from hifumotion.experiment.blob import Blob
 from hifumotion.experiment.config import TwinConfig
 from hifumotion.experiment import imaging as im
@@ -406,6 +407,15 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
                 for k, t in enumerate(times)))
     system = sim.system
     motion = motion_summary(frame_masks, px, times, sim.tissue_mm, dx, cfg.tank.size_mm)
+    lo, hi = sim.tissue_mm.min(axis=(0, 1)), sim.tissue_mm.max(axis=(0, 1))
+    walls = np.asarray(cfg.tank.size_mm, float)
+    # the finite-element truths have no side walls (reference.creep_fe): a sample whose surface
+    # (half a spacing beyond its particles) reaches them would be stopped there, and is not the scene's
+    if cfg.truth.solver in ("finite_elements", "finite_strain") and (
+            np.any(lo[[0, 2]] < 0.5 * dx) or np.any(hi[[0, 2]] > walls[[0, 2]] - 0.5 * dx)):
+        raise InputError(f"the truth's sample spans {np.round(lo, 1).tolist()} to {np.round(hi, 1).tolist()} mm, "
+                         f"within half a spacing of the tank's side walls (0 to {list(cfg.tank.size_mm)} mm), which "
+                         "the finite-element truth does not model: enlarge the tank or shorten the push", "tank.size_mm")
     write_json(tru / "motion.json", motion)
     facts = {**facts, **res, "truth_tissue_particles": int(len(pts)),
              "model_tissue_particles": cfg.resolution.model_tissue_particles}
