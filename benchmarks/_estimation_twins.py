@@ -82,12 +82,15 @@ LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
         "physics": {"friction": 0.1},
         "protocol": {"peak_travel_mm": 6.0, "angle_deg": 30.0},
     }),
-    "drive_release_s49": ("drive_release", {
+    # (drive_release_s49, a push and release, is out until the finite-strain truth converges
+    # through the release: "the push does not converge at t = 5.5 s", docs/decisions.md)
+    "slide_s49": ("slide", {
         "seed": 49,
         "blob": {"size_mm": [27.0, 18.0, 22.0], "lobes": 4, "irregularity": 0.16},
         "tissue": {"youngs_modulus_pa": 11000.0, "poisson_ratio": 0.45, "beta1": 2.0e5, "beta2": 0.55},
         "bar": {"radius_mm": 6.5},
-        "protocol": {"peak_travel_mm": 4.0, "ramp_s": 3.0, "hold_s": 2.5},
+        "physics": {"friction": 0.2},
+        "protocol": {"peak_travel_mm": 4.0, "angle_deg": 40.0},
     }),
 }
 

@@ -16,6 +16,7 @@ Usage::
 
     python benchmarks/bench_fe_reference.py                       # 1,100 / 2,200 / 4,399 particles
     python benchmarks/bench_fe_reference.py --particles 4399 --fine 1.0
+    python benchmarks/bench_fe_reference.py --quick --edge-spacings 0    # the sharp-edged bar
 """
 
 from __future__ import annotations
@@ -45,7 +46,18 @@ def main() -> None:
     ap.add_argument("--particles", default="1100,2200,4399")
     ap.add_argument("--coarse", type=float, default=4.0, help="reference's largest tetrahedron (mm³), coarse mesh")
     ap.add_argument("--fine", type=float, default=1.0, help="… and fine mesh")
+    ap.add_argument("--quick", action="store_true", help="1,100 particles, references of 8 and 4 mm³: minutes")
+    ap.add_argument("--edge-spacings", type=float, default=None,
+                    help="the fast path's bar rim rounding in spacings (CreepSettings.bar_edge_spacings; "
+                         "0: the reference's sharp edge)")
     args = ap.parse_args()
+    if args.quick:
+        args.particles, args.coarse, args.fine = "1100", 8.0, 4.0
+    creep_settings = None
+    if args.edge_spacings is not None:
+        from hifumotion.creep.settings import CreepSettings
+
+        creep_settings = CreepSettings(bar_edge_spacings=args.edge_spacings)
     scene = Scene()
     scene.tissue = scene.tissue.model_copy(update={"beta1": 0.0})
     scene.physics.friction = 3.0   # rough: the stuck reference's limit (tests/test_creep.py says why not 100)
@@ -61,7 +73,7 @@ def main() -> None:
         scene.particles.spacing_mm = dx
         mesh, _ = tissue_mesh(scene)
         t0 = time.perf_counter()
-        sim = simulate_creep(scene, mesh=mesh)
+        sim = simulate_creep(scene, mesh=mesh, settings=creep_settings)
         fast_s = time.perf_counter() - t0
         u_fast = sim.tissue_mm[-1] - mesh.centres_mm
         punch, axis = scene_punch(scene, mesh.centres_mm, dx)

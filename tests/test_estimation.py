@@ -239,6 +239,56 @@ def test_least_squares_recovers_known_parameters_and_flags_the_undetermined():
     assert costs[2.0] == pytest.approx(costs[1.0], abs=1e-6) and costs[0.5] == pytest.approx(costs[1.0], abs=1e-6)
 
 
+class FrictionEvaluator(AnalyticEvaluator):
+    """The analytic evaluator on a space that fits the friction too: ln μ_f has its own pattern."""
+
+    def __init__(self, truth: Parameters, frames=(1, 2, 3)):
+        from hifumotion.estimation.space import FRICTION_BOUNDS
+
+        super().__init__(truth, frames)
+        self.space = SearchSpace(friction=FRICTION_BOUNDS)
+        self.truth = self.space.theta(truth)
+        self.patterns = np.concatenate([self.patterns, np.random.default_rng(1).normal(0, 1, (1,) + self.patterns.shape[1:])])
+
+    def _submit(self, ks, n):
+        out = []
+        for k in ks:
+            d = self.space.theta(k) - self.truth
+            r = sum(p * v for p, v in zip(self.patterns, (d[0], d[1] * 10, d[2] * 0.3, d[4])))
+            out.append({"residuals_mm": r[:n], "seconds": 0.0, "steps": 0})
+            self.runs += 1
+        return out
+
+
+def test_the_friction_as_a_fifth_coordinate_is_recovered_and_its_design_spans_it():
+    from hifumotion.estimation.space import FRICTION_BOUNDS
+
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
+    ev = FrictionEvaluator(truth)
+    assert ev.space.names[-1] == "log_mu" and len(ev.space.steps) == 5
+    design = ev.space.initial_design()
+    assert len(design) == 12
+    mus = sorted({float(np.exp(t[4])) for t in design})
+    assert len(mus) == 2 and FRICTION_BOUNDS[0] < mus[0] < mus[1] < FRICTION_BOUNDS[1]
+    start = ev.space.theta(Parameters(0.25, 20000.0, 0.47, 1e4, 0.7, friction=0.4))
+    fit = least_squares_fit(ev, start, max_evaluations=20)
+    k = ev.space.parameters(fit.theta)
+    assert k.friction == pytest.approx(0.12, rel=0.01)
+    assert k.youngs_modulus_pa == pytest.approx(9000.0, rel=0.01)
+    assert uncertainty(ev, fit.theta).determined["log_mu"]
+    # a space without the coordinate leaves the friction to the model's setting
+    assert SearchSpace().parameters(SearchSpace().theta(truth)).friction is None
+
+
+def test_a_fitted_friction_reaches_the_models_scene():
+    from hifumotion.estimation.model import ModelSpec, scene_for
+    from hifumotion.particles.scene import Scene
+
+    spec = ModelSpec(Scene(), np.zeros((1, 3)), np.ones(1), np.zeros((1, 3)), 0.05)
+    assert scene_for(spec, Parameters(friction=0.07), 10).physics.friction == 0.07
+    assert scene_for(spec, Parameters(), 10).physics.friction == Scene().physics.friction
+
+
 def test_table1_meets_its_thresholds():
     truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5)
     ev = AnalyticEvaluator(truth, frames=(1, 2, 3, 4))

@@ -43,7 +43,7 @@ from hifumotion.estimation.settings import CalibrationSettings
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm
 from hifumotion.estimation.prepare import Observation
 from hifumotion.estimation.protocol import default_frames, parse_frames
-from hifumotion.estimation.space import NAMES, STEPS, SearchSpace
+from hifumotion.estimation.space import FRICTION_BOUNDS, FRICTION_NAME, SearchSpace
 
 OBJECTIVES = ("auto", "contour", "contour+displacement")
 #: Largest space-mapping move per coordinate, in units of 10 finite-difference steps
@@ -95,6 +95,10 @@ class Calibration:
                                         "std": k.beta1 / k.youngs_modulus_pa * float(np.hypot(rel["log_E"], rel["log_beta1"])),
                                         "determined": self.determined["log_beta1"]},
         }
+        if FRICTION_NAME in rel:
+            out["friction"] = {"value": k.friction, "std": k.friction * rel[FRICTION_NAME],
+                               "determined": self.determined[FRICTION_NAME],
+                               "note": "Coulomb's μ_f of the floor and the bar's face, fitted (a driven bar's slide)"}
         for entry in out.values():   # an error no data bound is "unknown", not a number
             if entry["std"] is not None and not np.isfinite(entry["std"]):
                 entry["std"] = None
@@ -111,10 +115,15 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     n_frames = len(observation.frame_masks)
     frames = parse_frames(s.training_frames, n_frames, "training_frames") or default_frames(n_frames)[0]
     data = TrainingData.from_masks(observation.frame_masks, frames, observation.frame_plane)
-    space = SearchSpace(force_n=s.force_n)
-
     t0 = time.perf_counter()
     final = model_spec(observation, s.model)
+    driven = final.scene.bar.enabled and final.scene.bar.control == "travel"
+    fit_friction = driven if s.fit_friction is None else s.fit_friction
+    if fit_friction and s.search_integrator != "implicit":
+        # a reduced model's contacts carry the friction it was made at
+        raise InputError("fitting the friction needs search_integrator = implicit (or set fit_friction = false)",
+                         "search_integrator")
+    space = SearchSpace(force_n=s.force_n, friction=FRICTION_BOUNDS if fit_friction else None)
     search_settings = ModelSettings(**{**s.model.__dict__, "integrator": s.search_integrator,
                                        "tissue_particles": min(s.search_particles, s.model.tissue_particles)})
     search = model_spec(observation, search_settings)
@@ -204,8 +213,8 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             r_search = ev.one(theta)
             # only the coordinates the data determine move, by at most MAX_MAPPING_STEP step units
             # a step: the search model's Jacobian is a linearisation, not a licence for long jumps
-            free = np.array([unc.determined[n] for n in NAMES])
-            limit = MAX_MAPPING_STEP * STEPS * 10
+            free = np.array([unc.determined[n] for n in space.names])
+            limit = MAX_MAPPING_STEP * space.steps * 10
             tried = []
             current = theta
             with ev.sibling(final) as fine_ev:
@@ -229,7 +238,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             theta = best_theta
             timings["space_mapping_s"] = time.perf_counter() - t3
             tell("map", 1.0)
-    std = {n: float(v) for n, v in zip(NAMES, unc.std)}   # inf: not seen by the data
+    std = {n: float(v) for n, v in zip(space.names, unc.std)}   # inf: not seen by the data
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), fit_result, table1,
                        mapped, degeneracy, unc.correlation.round(3).tolist(), final, search, observation,
                        ev.runs, timings, ev.failed, objective)
@@ -263,6 +272,8 @@ def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:
         "poisson_ratio": (k.poisson_ratio, truth["poisson_ratio"]),
         "beta2": (k.beta2, truth["beta2"]),
     }
+    if "friction" in report and truth.get("friction"):
+        pairs["friction"] = (k.friction, truth["friction"])
     return {name: {"fit": fit, "truth": true, "rel_error": fit / true - 1, "std": report[name]["std"],
                    "determined": report[name]["determined"]} for name, (fit, true) in pairs.items()}
 

@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hifumotion.estimation.evaluator import Evaluator
-from hifumotion.estimation.space import NAMES, STEPS
 
 
 @dataclass
@@ -54,7 +53,8 @@ def jacobian(ev: Evaluator, theta: np.ndarray) -> np.ndarray:
     """Forward-difference Jacobian ``(n·M, p)`` of the residuals (mm per coordinate unit), runs in parallel.
 
     A step that would leave the bounds is taken backwards instead."""
-    steps = np.where(theta + STEPS > ev.space.upper, -STEPS, STEPS)
+    step = ev.space.steps
+    steps = np.where(theta + step > ev.space.upper, -step, step)
     points = [theta + np.eye(len(theta))[i] * steps[i] for i in range(len(theta))]
     base, *shifted = ev.residuals([theta] + points)
     return np.stack([(r - base).ravel() / s for r, s in zip(shifted, steps)], axis=1)
@@ -75,7 +75,7 @@ def least_squares_fit(ev: Evaluator, theta0: np.ndarray, max_evaluations: int = 
     lo, hi = ev.space.lower, ev.space.upper
     x0 = np.clip(theta0, lo + 1e-9, hi - 1e-9)
     sol = least_squares(fun, x0, jac=lambda t: jacobian(ev, t), bounds=(lo, hi), method="trf",
-                        loss="soft_l1", f_scale=f_scale, x_scale=STEPS * 10, max_nfev=max_evaluations,
+                        loss="soft_l1", f_scale=f_scale, x_scale=ev.space.steps * 10, max_nfev=max_evaluations,
                         xtol=1e-3, ftol=1e-3, gtol=1e-6)
     r = ev.one(sol.x)
     return FitResult(sol.x, r, "least_squares", int(sol.nfev), ev.runs, trace, str(sol.message))
@@ -145,10 +145,10 @@ def uncertainty(ev: Evaluator, theta: np.ndarray) -> Uncertainty:
     cov = s2 * (vt[seen].T / sv[seen] ** 2) @ vt[seen]
     d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
     corr = cov / np.outer(d, d)
-    scale = np.array([0.2, 0.05, 0.2, 0.2])
-    scaled_sv = np.linalg.svd(j * STEPS, compute_uv=False)
+    scale = np.array([0.2, 0.05, 0.2, 0.2, 0.2][:p])   # ln μ_f: 20 %, as ln E
+    scaled_sv = np.linalg.svd(j * ev.space.steps, compute_uv=False)
     return Uncertainty(std, corr, scaled_sv, float(np.sqrt(s2)),
-                       {name: bool(s < sc) for name, s, sc in zip(NAMES, std, scale)})
+                       {name: bool(s < sc) for name, s, sc in zip(ev.space.names, std, scale)})
 
 
 def degeneracy(ev: Evaluator, theta: np.ndarray, factors=(0.5, 2.0)) -> list[dict]:

@@ -51,10 +51,12 @@ def _score(ev: Evaluator, theta: np.ndarray, t: int, limits: np.ndarray) -> tupl
 def _adjust(ev: Evaluator, theta: np.ndarray, t: int, limits: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
     """Compass search on ``max_i S_i / limit_i`` (i ≤ t) until it is ≤ 1 (rule 2)."""
     lo, hi = ev.space.lower, ev.space.upper
-    steps = INITIAL_STEPS.copy()
+    # the friction's coordinate (ln μ_f), when fitted, starts at a factor 1.6, as ln E's
+    initial = np.append(INITIAL_STEPS, [0.5] * (len(theta) - len(INITIAL_STEPS)))
+    steps = initial.copy()
     best, s = _score(ev, theta, t, limits)
     used = 0
-    while best > 1.0 and used < budget and np.any(steps > INITIAL_STEPS * MIN_STEP_FRACTION):
+    while best > 1.0 and used < budget and np.any(steps > initial * MIN_STEP_FRACTION):
         trials = []
         for i in range(len(theta)):
             for sign in (1.0, -1.0):

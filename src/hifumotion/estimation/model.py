@@ -50,9 +50,10 @@ class Parameters:
     poisson_ratio: float = paper.POISSON_RATIO          # ν
     beta1: float = paper.BETA1                          # β1 of Eq. 16 (Pa·s^(1+β2))
     beta2: float = paper.BETA2                          # β2 of Eq. 16
+    friction: float | None = None                       # μ_f of the floor and the bar (None: the model's setting)
 
     def as_dict(self) -> dict[str, float]:
-        return {k: float(v) for k, v in asdict(self).items()}
+        return {k: float(v) for k, v in asdict(self).items() if v is not None}
 
     def replaced(self, **changes: float) -> "Parameters":
         return replace(self, **changes)
@@ -221,6 +222,8 @@ def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
     scene.tissue.poisson_ratio = k.poisson_ratio
     scene.tissue.beta1 = k.beta1
     scene.tissue.beta2 = k.beta2
+    if k.friction is not None:
+        scene.physics.friction = k.friction
     if scene.bar.control == "force" and scene.bar.schedule_force_n is not None:
         # a known shape, an unknown magnitude: the schedule scales with the fitted peak (a driven
         # bar's travel is known: its force is a result, F is no parameter of its runs)

@@ -96,6 +96,10 @@ class CalibrationSettings(ConfigModel):
     space_mapping: bool = Field(True, description="implicit search: map the search model's fit to the final model (output space mapping)")
     mapping_runs: int = Field(3, ge=1, le=100, description="runs of the final model in the space mapping (each verified)")
     degeneracy_check: bool = Field(True, description="run and report the F–E–β1 scaling the push cannot see")
+    fit_friction: bool | None = Field(
+        None, description="fit the friction of the floor and the bar's face (ln μ_f, 0.02 … 1) as a fifth "
+                          "coordinate; unset: when the bar is driven (its slide is set by the friction), "
+                          "otherwise held at [estimation.model] friction. Needs search_integrator = implicit")
     objective: Literal["auto", "contour", "contour+displacement"] = Field(
         "auto", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points; auto: the displacement too where speckle tracking observed it")
     quality_weights: bool = Field(

@@ -158,7 +158,8 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
         p = meta["parameters"]
         k = Parameters(force_n=p["external_force_n"]["value"], youngs_modulus_pa=p["youngs_modulus_pa"]["value"],
                        poisson_ratio=p["poisson_ratio"]["value"], beta1=p["beta1_pa_s_pow"]["value"],
-                       beta2=p["beta2"]["value"])
+                       beta2=p["beta2"]["value"],
+                       friction=p["friction"]["value"] if "friction" in p else None)
         settings = ModelSettings(**meta["model_settings"])
         interval = float(meta["frame_interval_s"])
     except (KeyError, TypeError, ValueError) as exc:
