@@ -131,7 +131,7 @@ def uncertainty(ev: Evaluator, theta: np.ndarray) -> Uncertainty:
     give the coordinates along them an infinite error. The contour points' errors are
     correlated along the contour, so these standard errors are lower bounds. A
     coordinate is *determined* when its standard error is below its relevance scale
-    (20 % for ln E and ln β1, 0.05 for ν, 0.2 for β2)."""
+    (20 % for ln E, ln β1 and ln μ_f, 0.05 for ν, 0.2 for β2)."""
     j = jacobian(ev, theta)
     r = ev.one(theta).ravel()
     m, p = j.shape
