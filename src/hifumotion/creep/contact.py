@@ -25,11 +25,11 @@ changes by the usual active-set rules (Wriggers, *Computational Contact Mechanic
   guessed friction made (it takes a zero one and the next round decides); one released
   within a step comes back in that step only if it crosses by ``left_tolerance_m`` (an
   edge node of a rough patch can otherwise chatter on and off the surface, as the FE
-  reference's rule has it);
+  reference's rule has it).
 
 The bar is a solid cylinder of ``radius_m`` whose end's edge is rounded (``edge_radius_m``,
-centred on the real edge): a flat face, a quarter-torus rim and a side. A node touches it where its signed distance to
-that solid is below the tolerance, and is held on the solid's **tangent plane where it
+centred on the real edge): a flat face, a quarter-torus rim and a side. A node touches it
+where its signed distance to that solid is below the tolerance, and is held on the solid's **tangent plane where it
 touched** (its own normal ``n``), which the bar carries along its axis ``a``: its normal
 displacement is prescribed as ``const + (a·n) s``. At each step's end the tangent planes are
 taken again where the contacts now are (:meth:`ContactSet.refresh_bar`): a node that slides
@@ -120,9 +120,8 @@ class Punch:
     """The bar's flat end: a disc of ``radius_m`` at ``tip_m``, pushed along unit ``axis``.
 
     ``edge_radius_m``: the rim's rounding (m; None: the solver's, ``CreepSettings.bar_edge_spacings``
-    spacings — a voxel mesh cannot see a sharper edge). ``force_n(t)`` is the push (N) at time t (s);
-    ``breakpoints_s`` the times where the
-    schedule bends (the integrator lands a step on each). With ``travel_m`` (travel control)
+    spacings — a voxel mesh cannot see a sharper edge). ``force_n(t)`` is the push (N) at time t
+    (s); ``breakpoints_s`` the times where the schedule bends (the integrator lands a step on each). With ``travel_m`` (travel control)
     the bar is driven instead: its end is ``travel_m(t)`` (m) along the axis beyond where it
     rests on the settled tissue, ``force_n`` is not read, and the force it takes is a result.
     """
@@ -201,6 +200,10 @@ class ContactSet:
         axis = self.body_frames[self.punch_index, 0]
         return float(self.pressure[nodes] @ (self.node_frames[nodes, 0] @ axis))
 
+    def _core_radius_m(self) -> float:
+        """The radius (m) where the flat face ends and the rounded rim begins: R − r/2."""
+        return self.punch.radius_m - 0.5 * float(self.punch.edge_radius_m)
+
     def gaps(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Smallest signed gap (m) of every node to the solids and which solid (−1: none near)."""
         x = self.rest + u
@@ -238,7 +241,7 @@ class ContactSet:
         r = float(self.punch.edge_radius_m)
         along, across, radial = self._in_bar(x_m, advance_m)
         front = along + r                        # beyond the core's face
-        out = across - (self.punch.radius_m - 0.5 * r)  # beyond the core's side
+        out = across - self._core_radius_m()     # beyond the core's side
         rim = (out > 0) & (front > 0)
         corner = np.hypot(out, front)
         inside = (out <= 0) & (front <= 0)
@@ -255,7 +258,7 @@ class ContactSet:
         axis to the face or the rounded rim), and whether the node is under the bar at all."""
         along, across, _ = self._in_bar(self.rest + u, advance_m)
         r = float(self.punch.edge_radius_m)
-        out = np.clip(across - (self.punch.radius_m - 0.5 * r), 0.0, r)
+        out = np.clip(across - self._core_radius_m(), 0.0, r)
         # the rim recedes behind the face's plane by r − √(r² − out²)
         return along + r - np.sqrt(r * r - out * out), across <= self.punch.radius_m + 0.5 * r
 
@@ -285,37 +288,34 @@ class ContactSet:
             self.pressure[nodes[bodies == b]] = self.pressure[mine].mean() if mine.any() else 0.0
         self.body[nodes] = bodies
         if self.punch is not None:
-            self._tangent_planes(nodes[bodies == self.punch_index], u, advance_m)
+            on_bar = nodes[bodies == self.punch_index]
+            self.node_frames[on_bar], self.node_offset[on_bar] = self._tangent_planes(on_bar, u, advance_m)
         self.fresh[nodes] = True
         self.status[nodes] = np.where(self.bonded[bodies], STICK, SLIP)
         self.anchor[nodes] = u[nodes]
         self.version += 1
 
-    def _tangent_planes(self, nodes: np.ndarray, u: np.ndarray, advance_m: float) -> np.ndarray:
-        """The bar's tangent planes at its surface point nearest each of ``nodes`` (set in
-        ``node_frames`` and ``node_offset``); returns how far (rad) each normal turned."""
-        if len(nodes) == 0:
-            return np.zeros(0)
+    def _tangent_planes(self, nodes: np.ndarray, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """The bar's tangent planes at its surface point nearest each of ``nodes``: their frames
+        ``(m, 3, 3)`` (normal first) and offsets (m) along the normal at advance 0."""
         x = self.rest[nodes] + u[nodes]
         gap, normal = self.bar_distance(x, advance_m)
-        turn = np.arccos(np.clip(np.einsum("nk,nk->n", normal, self.node_frames[nodes, 0]), -1.0, 1.0))
         a = self.body_frames[self.punch_index, 0]
-        self.node_frames[nodes] = _frames(normal)
         # the surface point x − gap n lies on the plane; at advance 0 the plane is (a·n) advance back
-        self.node_offset[nodes] = np.einsum("nk,nk->n", x, normal) - gap - advance_m * (normal @ a)
-        return turn
+        return _frames(normal), np.einsum("nk,nk->n", x, normal) - gap - advance_m * (normal @ a)
 
     def refresh_bar(self, u: np.ndarray, advance_m: float, turn_rad: float = 1e-6) -> None:
-        """End of a step: each bar contact's tangent plane taken again where it now is (its
-        normal turned by more than ``turn_rad``: a node sliding over the rounded rim)."""
+        """End of a step: each bar contact's tangent plane taken again where it now is, if its
+        normal turned by more than ``turn_rad`` (a node sliding over the rounded rim); the others
+        keep theirs exactly (a face contact's never changes)."""
         nodes = self.on_bar()
         if len(nodes) == 0:
             return
-        frames, offset = self.node_frames[nodes].copy(), self.node_offset[nodes].copy()
-        turned = self._tangent_planes(nodes, u, advance_m) > turn_rad
-        # the others keep their planes exactly (a face contact's never changes)
-        self.node_frames[nodes[~turned]], self.node_offset[nodes[~turned]] = frames[~turned], offset[~turned]
+        frames, offset = self._tangent_planes(nodes, u, advance_m)
+        cos = np.einsum("nk,nk->n", frames[:, 0], self.node_frames[nodes, 0])
+        turned = np.arccos(np.clip(cos, -1.0, 1.0)) > turn_rad
         if turned.any():
+            self.node_frames[nodes[turned]], self.node_offset[nodes[turned]] = frames[turned], offset[turned]
             self.version += 1
 
     def release(self, nodes: np.ndarray) -> None:
