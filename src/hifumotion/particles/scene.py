@@ -98,6 +98,7 @@ class BarConfig(ConfigModel):
     enabled: bool = Field(True, description="whether there is a pushing bar")
     radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar (its flat pushing end) in mm")
     length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
+    edge_radius_mm: float = Field(0.5, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the finite-strain truth's bar is this solid, the particle and small-strain paths push with the end's flat disc")
     direction: tuple[float, float, float] = Field((0.0, -1.0, 0.0), description="unit vector the bar points and pushes along (default: down onto the tissue)")
     tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: touching the tissue (one spacing from the first tissue particle under its end face), on the axis through the tissue's centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
@@ -125,6 +126,8 @@ class BarConfig(ConfigModel):
                 raise ValueError(f"{name}: the bar pushes, it does not pull; values must be ≥ 0")
         if np.linalg.norm(self.direction) == 0:
             raise ValueError("direction must not be zero")
+        if self.edge_radius_mm > self.radius_mm:
+            raise ValueError(f"edge_radius_mm ({self.edge_radius_mm:g}) must be at most radius_mm ({self.radius_mm:g})")
         return self
 
     def schedule(self):

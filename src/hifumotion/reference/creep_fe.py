@@ -58,6 +58,8 @@ class CreepingTissue:
     ``travel_mm(t)``: travel control — the bar driven that far (mm) along its axis from where
     it rests on the settled tissue, ``force_n`` then not read (its force is a result); only
     the finite-strain truth drives a bar (:mod:`.finite_strain_push`).
+    ``edge_radius_mm``: the rounding of the edge of the bar's end (mm); only the finite-strain
+    truth, whose bar is a solid, has one (the small-strain truth's is its end's disc).
     """
 
     vertices_mm: np.ndarray
@@ -81,6 +83,7 @@ class CreepingTissue:
     mu_max_pa_s: float = MU_MAX_PA_S
     max_volume_mm3: float = 2.0
     travel_mm: Callable[[float], float] | None = None
+    edge_radius_mm: float = 0.5
 
 
 @dataclass

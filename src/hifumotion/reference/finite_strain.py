@@ -11,13 +11,15 @@ the tissue's two laws, for FElupe (Voigt, Zenodo 2021; nonlinear solids, rigid c
   does not lock as ν → 0.5.
 * **Viscosity** (Eq. 12 and 16 as a continuum, Kelvin–Voigt, as the small-strain truth and
   the fitted model take it): the viscous Cauchy stress σ_v = 2 μ(γ̇) **d**, **d** the rate of
-  deformation, γ̇ = √(2 dev **d** : dev **d**), μ = β₁ max(γ̇, floor)^β₂ — the law of
+  deformation, γ̇ = √(2 **d** : **d**), μ = β₁ max(γ̇, floor)^β₂ — the law of
   :mod:`hifumotion.rheology`, whose μ cap (10⁷ Pa·s, for near particle pairs) no continuum
   reaches and is left out. In a backward-Euler step of length Δt the stress derives from an
-  *incremental potential* (Ortiz & Stainier, CMAME 1999): W_v = Δt [φ(γ̇) + μ(γ̇) (tr **d**)²/3]
-  with φ(γ̇) = ∫₀^γ̇ μ(s) s ds, so ∂W_v/∂**d** = Δt 2 μ **d** — exactly for the deviator and
-  for β₂ = 0; for β₂ ≠ 0 the volumetric term adds μ'(γ̇)(tr **d**)²/3 ∂γ̇/∂**d**, second order
-  in the volumetric rate, which a nearly incompressible tissue keeps near zero.
+  *incremental potential* (Ortiz & Stainier, CMAME 1999): W_v = Δt φ(γ̇) with
+  φ(γ̇) = ∫₀^γ̇ μ(s) s ds, so ∂W_v/∂**d** = Δt μ γ̇ ∂γ̇/∂**d** = Δt 2 μ **d** exactly, for any β₂.
+  (γ̇ is the whole rate's, not its deviator's: a nearly incompressible tissue keeps tr **d**
+  near zero, so the two differ little — but μ at the deviatoric rate times the volumetric rate
+  is no potential's derivative that stays smooth where the deviatoric rate vanishes, and its
+  tangent was 23 % off its own force's derivative once a driven bar stopped, docs/decisions.md.)
   The rate is measured objectively from the right Cauchy–Green tensors of the step's end
   and start: Ė = (C − Cₙ) / (2Δt), and **d** = F⁻ᵀ Ė F⁻¹ has the invariants
   tr **d** = tr(Ė C⁻¹), **d** : **d** = tr(Ė C⁻¹ Ė C⁻¹), which need C only. Cₙ is the
@@ -50,13 +52,11 @@ def viscous_increment_potential(C, statevars, beta1_mpa_s_pow, beta2, rate_floor
     c_start = from_triu_1d(statevars[:6], like=C)
     rate = (C - c_start) / (2.0 * dtime_s)                 # Ė (1/s)
     a = rate @ inv(C)                                      # Ė C⁻¹: d's invariants
-    tr_a = tm.trace(a)
-    # γ̇² = 2 dev d : dev d, ≥ 0 up to round-off. No max(·, 0) here: at rest (C = Cₙ, the
-    # first iteration of every step) the max's derivative takes the branch 0 and the
-    # tangent loses the deviatoric viscosity — a quarter of the true one, Newton's line
-    # search then finds no decrease (docs/decisions.md, issue 41). A round-off negative
-    # only enters the floor's quadratic branch, where it is harmless.
-    gamma2 = 2.0 * (tm.trace(a @ a) - tr_a ** 2 / 3.0)
+    # γ̇² = 2 d : d ≥ 0 (up to round-off). No max(·, 0) here: at rest (C = Cₙ, the first
+    # iteration of every step) the max's derivative takes the branch 0 and the tangent loses
+    # the viscosity — Newton's line search then finds no decrease (docs/decisions.md, issue
+    # 41). A round-off negative only enters the floor's quadratic branch, where it is harmless.
+    gamma2 = 2.0 * tm.trace(a @ a)
     f2 = rate_floor_per_s ** 2
     # φ(γ̇) = ∫₀^γ̇ μ(s) s ds, written in γ̇² (no square root, whose second derivative at rest
     # is infinite); the branch above the floor sees γ̇² ≥ floor² only, for the same reason
@@ -65,10 +65,6 @@ def viscous_increment_potential(C, statevars, beta1_mpa_s_pow, beta2, rate_floor
     above = (0.5 * beta1_mpa_s_pow * rate_floor_per_s ** (beta2 + 2.0)
              + beta1_mpa_s_pow * (tm.maximum(gamma2, f2) ** p - f2 ** p) / (beta2 + 2.0))
     phi = tm.if_else(gamma2 <= f2, below, above)
-    # the volumetric rate, as the small-strain truth and the fitted model take it (σ_v = 2 μ d,
-    # not only its deviator): μ (tr d)² / 3, μ at the deviatoric rate (module docstring)
-    mu = beta1_mpa_s_pow * tm.maximum(gamma2, f2) ** (0.5 * beta2)
-    phi = phi + mu * tr_a ** 2 / 3.0
     return dtime_s * phi, triu_1d(C)
 
 

@@ -16,9 +16,12 @@ approximations:
   seconds, so the tissue's inertia (consistent mass, as the small-strain truth's) weighs
   ~10⁻⁸ of the forces; it is kept because it is what holds the rigid motion of a sample its
   contacts barely hold (the frictionless floor of a sliding push).
-* **Contacts** (FElupe's penalty contact with rigid planes, Coulomb friction with an
-  elastic slip): the floor y = 0 under every surface node, and the bar's flat end under the
-  surface nodes whose rest position lies within its radius of its axis. The bar is a rigid
+* **Contacts** (FElupe's penalty node-to-rigid-surface contact, Coulomb friction with an
+  elastic slip): the floor y = 0 under every surface node, and the bar as a solid — a
+  cylinder of its radius whose flat end's edge is rounded (``CreepingTissue.edge_radius_mm``:
+  face, quarter-torus rim and side, :func:`bar_gap`) — against every surface node, so
+  tissue that bulges beside the bar or slides past its rim meets its side, not the end's
+  plane continued beyond the rim. The bar is a rigid
   body that translates along its axis; the force schedule F(t) pushes it. Its axial stiffness
   is the tissue's alone: to keep Newton's steps defined while it is out of contact, its
   matrix (not its residual) holds a stiffness of the order of the tissue's under a punch,
@@ -50,9 +53,7 @@ class FiniteStrainSettings:
     tissue's mean stiffness at the contact points; the bar's face, which takes the whole push on
     a few nodes where the floor spreads the weight over many, ten times the floor's: at the
     floor's × 100 the small twin's face penetrated 0.023 mm, above 1 % of its spacing, and
-    × 1,000 moves the field by 3 %, docs/decisions.md), how far beyond its radius a driven bar's
-    face takes contact candidates (this many times its largest travel: the sample it slides moves
-    under it — a face tilted 30° outruns its own travel by 1.5 times), the elastic slip of a sticking contact
+    × 1,000 moves the field by 3 %, docs/decisions.md), the elastic slip of a sticking contact
     (mm), and Newton's tolerance: the largest residual force (N) of a solve as a fraction of
     its push plus the tissue's weight. At 10⁻² the push's field is within 0.2 % of FElupe's
     own measure at 10⁻⁴ (which bounded the residual by ~3 % of the push) and the settle under
@@ -63,13 +64,12 @@ class FiniteStrainSettings:
     step_s: float = 0.05
     contact_multiplier: float = 100.0
     face_contact_multiplier: float = 1000.0
-    face_reach_factor: float = 2.0
     elastic_slip_mm: float | None = 0.005
     newton_tol: float = 1e-2
     max_halvings: int = 8
 
     def __post_init__(self):
-        for name in ("step_s", "contact_multiplier", "face_contact_multiplier", "face_reach_factor", "elastic_slip_mm",
+        for name in ("step_s", "contact_multiplier", "face_contact_multiplier", "elastic_slip_mm",
                      "newton_tol"):
             value = getattr(self, name)
             if value is None and name == "elastic_slip_mm":
@@ -203,6 +203,88 @@ class _Inertia(_Item):
         return self.mass * (1e-3 / self.dt ** 2)
 
 
+def _advance_to_touch(offsets_mm: np.ndarray, axis: np.ndarray, radius_mm: float, edge_radius_mm: float) -> np.ndarray:
+    """For points at ``offsets_mm`` from the centre of the bar's end (:func:`bar_gap`), how
+    far (mm) the bar advances along its unit ``axis`` before it touches each: the axial offset,
+    plus how far the rounded rim lies behind the face at that point's lateral distance (∞ for
+    points beside the bar, which its side never meets by advancing)."""
+    along = offsets_mm @ axis
+    d = np.linalg.norm(offsets_mm - np.outer(along, axis), axis=1)
+    core = radius_mm - edge_radius_mm
+    behind = edge_radius_mm - np.sqrt(np.clip(edge_radius_mm ** 2 - (d - core) ** 2, 0.0, None))
+    return np.where(d <= core, along, np.where(d <= radius_mm, along + behind, np.inf))
+
+
+def bar_gap(offsets_mm: np.ndarray, axis: np.ndarray, radius_mm: float, edge_radius_mm: float
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bar as a rigid solid: a cylinder of ``radius_mm`` about the unit ``axis`` (pointing
+    from the bar into the tissue) whose end, centred at the origin of ``offsets_mm``, is flat to
+    a = ``radius_mm − edge_radius_mm`` and rounded to the side by a quarter torus of
+    ``edge_radius_mm``; it extends without end behind its end.
+
+    Returns, for points at ``offsets_mm`` (n, 3) from the end's centre, the signed distance g
+    (mm; < 0 inside the bar), its gradient n and the gradient's derivative H (the curvature,
+    1/mm), region by region (d: the point's distance from the axis):
+
+    * face (d ≤ a): g = x·axis, n = axis, H = 0;
+    * rim (d > a, in front of the torus's centre circle): the distance to that circle less r; n
+      from the circle's nearest point, H = (I − n nᵀ − (a/d) e_θ e_θᵀ)/dist, e_θ circumferential;
+    * side: g = d − R, n = e_r, H = e_θ e_θᵀ/d (a cylinder's).
+
+    g and n are continuous across the regions — the rounding is what makes n so: a sharp edge
+    has none."""
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    core, edge = radius_mm - edge_radius_mm, float(edge_radius_mm)
+    along = offsets_mm @ a
+    radial = offsets_mm - along[:, None] * a
+    d = np.maximum(np.linalg.norm(radial, axis=1), 1e-9 * radius_mm)
+    e_r = radial / d[:, None]
+    face = d <= core
+    rim = ~face & (along > -edge)
+    side = ~face & ~rim
+    gap = np.empty(len(offsets_mm))
+    normal = np.empty_like(offsets_mm, dtype=float)
+    curvature = np.zeros((len(offsets_mm), 3, 3))
+    gap[face], normal[face] = along[face], a
+    q = (d[rim] - core)[:, None] * e_r[rim] + (along[rim] + edge)[:, None] * a
+    dist = np.maximum(np.linalg.norm(q, axis=1), 1e-9 * radius_mm)
+    n = q / dist[:, None]
+    gap[rim], normal[rim] = dist - edge, n
+    hoop = np.eye(3) - np.outer(a, a) - np.einsum("ai,aj->aij", e_r, e_r)          # e_θ e_θᵀ
+    curvature[rim] = (np.eye(3) - np.einsum("ai,aj->aij", n, n)
+                      - (core / d[rim])[:, None, None] * hoop[rim]) / dist[:, None, None]
+    gap[side], normal[side] = d[side] - radius_mm, e_r[side]
+    curvature[side] = hoop[side] / d[side][:, None, None]
+    return gap, normal, curvature
+
+
+def _bar_surface_class():
+    """:class:`_BarSurface`, made on first use (FElupe is an optional dependency)."""
+    global _BarSurface
+    if _BarSurface is None:
+        import felupe as fem
+
+        class BarSurface(fem.mechanics.ContactRigidBase):
+            """The bar of :func:`bar_gap` as FElupe's rigid surface for its node-to-surface
+            contact (penalty, Coulomb friction), carried by the centre point of its end."""
+
+            def __init__(self, field, points, centerpoint, axis, radius_mm, edge_radius_mm, **kwargs):
+                if not 0.0 < edge_radius_mm <= radius_mm:
+                    raise InputError(f"must be > 0 and at most the bar's radius ({radius_mm:g} mm), got "
+                                     f"{edge_radius_mm:g}", "edge_radius_mm")
+                self.shape = (np.asarray(axis, float), float(radius_mm), float(edge_radius_mm))
+                super().__init__(field, points, centerpoint, **kwargs)
+
+            def _kinematics(self, dx):
+                return bar_gap(dx, *self.shape)
+
+        _BarSurface = BarSurface
+    return _BarSurface
+
+
+_BarSurface = None
+
+
 def _absolute_residual(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
     """FElupe's Newton check with the free dofs' residual in N (not over the reactions)."""
     free = f[dof1] if dof1 is not None else f
@@ -248,25 +330,13 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     tip = np.asarray(problem.tip_mm, float)
     size = float(np.ptp(points, axis=0).max())
     surface = np.flatnonzero(p2.on_surface)
-    rel = points[surface] - tip
-    lateral = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)
-    footprint = surface[lateral <= problem.radius_mm]
-    if len(footprint) == 0:
-        raise InputError("no surface node lies under the bar's face", "tip_mm")
-    # the face's contact candidates: the nodes under it at rest and, for a driven bar, those its
-    # travel may slide under it (its contact plane is unbounded: facts.physicality checks that
-    # it holds none beyond the face's rim)
-    reach = 0.0
-    if problem.travel_mm is not None:
-        sampled = np.union1d(np.linspace(0.0, times[-1], 201), [b for b in problem.breakpoints_s if b <= times[-1]])
-        reach = s.face_reach_factor * max(float(problem.travel_mm(t)) for t in sampled)
-    near = surface[lateral <= problem.radius_mm + reach]
-    # the face comes down along its axis to rest on the first node under it (as the
+    # the bar comes down along its axis to rest on the first node it meets (as the
     # small-strain truth's): a bar whose tip starts millimetres away would take Newton's
     # steps of F/k to cross the gap
-    rest = float(((points[footprint] - tip) @ axis).min())
-    # a candidate off the face's disc behind its plane at rest is not under the bar: left out
-    under_bar = np.union1d(footprint, near[(points[near] - tip) @ axis >= rest])
+    touch_at = _advance_to_touch(points[surface] - tip, axis, problem.radius_mm, problem.edge_radius_mm)
+    if not np.isfinite(touch_at).any():
+        raise InputError("no surface node lies under the bar's face", "tip_mm")
+    rest = float(touch_at.min())
     # the rigid bodies' reference points, a hair inside the tissue so their contacts start active
     touch = 1e-6 * size
     floor_point = [points[:, 0].mean(), points[:, 1].min() + touch, points[:, 2].mean()]
@@ -278,14 +348,10 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     elastic, viscous = law.bodies(field, s.step_s)
     floor = fem.ContactRigidPlane(field, surface, floor_index, normal=[0.0, 1.0, 0.0], friction=problem.floor_friction,
                                   multiplier=s.contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
-    def face_contact(nodes):
-        return fem.ContactRigidPlane(field, nodes, bar_point, normal=axis, friction=problem.bar_friction,
-                                     multiplier=s.face_contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
-
-    # the settle sees the nodes under the face at rest only (the plane is unbounded: the wider
-    # candidates of a driven bar, pressed while the tissue sinks, kept a sample from settling);
-    # the push sees every candidate
-    face = face_contact(footprint)
+    # the bar against every surface node: a solid, it holds only what touches its face, rim or side
+    face = _bar_surface_class()(field, surface, bar_point, axis, problem.radius_mm, problem.edge_radius_mm,
+                                friction=problem.bar_friction, multiplier=s.face_contact_multiplier, items=[elastic],
+                                elastic_slip=s.elastic_slip_mm)
     # the tissue's stiffness under a punch of the bar's radius, 2 E a / (1 − ν²) (N/mm)
     punch = 2.0 * problem.youngs_modulus_pa * PA_TO_MPA * problem.radius_mm / (1.0 - problem.poisson_ratio ** 2)
     bar = _Bar(field, bar_point, axis, punch, face)
@@ -306,6 +372,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
         snapshot = u.values.copy()
         step = fem.Step(items, ramp={bar: np.array([0.0 if driven else force_n])}, boundaries=boundaries)
         job = fem.Job([step], plugins=[fem.LinesearchPlugin()])
+
         try:
             tol_n = s.newton_tol * max(abs(force_n) + weight_n, 1e-9)
             job.evaluate(tol=tol_n, verbose=0, solver=spsolve, check=_absolute_residual)
@@ -321,9 +388,6 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     if viscous is not None:        # the viscosity's memory starts from the settled shape
         viscous.assemble.vector(field)
         viscous.results.update_statevars()
-    if len(under_bar) > len(footprint):
-        face = face_contact(under_bar)
-        bar.contact = face
     items = [elastic] + ([viscous] if viscous is not None else []) + [weight, inertia, floor, face, bar]
     at_rest = bar.displacement_mm().copy()
 
@@ -342,37 +406,31 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     last_reaction = 0.0
     inertia.rest()
     floor_y = floor_point[1] - touch                     # the floor's plane (the sample's lowest point at rest)
-    face_at_rest = tip + (rest + touch) * axis           # the face's point before the bar moves
-
-    contact_gap = 1e-3 * size      # a face node this close to the plane (mm) counts as held by it
 
     def measure() -> dict:
         """This frame's physicality (docs/decisions.md, issue 41): the smallest volume ratio J
         and the largest principal strain |λ − 1| over the quadrature points; how far the
-        tissue's nodes lie inside the floor and inside the bar — *any* node within the face's
-        radius of the moved axis, not only those the face contact was given at rest (a sample
-        that slides under the bar brings others); and how far beyond the face's rim the
-        contact plane holds a node (the contact's plane is unbounded, the bar's face is a disc)."""
+        tissue's nodes lie inside the floor and inside the bar (its face, rim or side: every
+        node, the penalty contacts' penetration)."""
         grad = field.extract(grad=True, add_identity=True)[0]
         c = np.einsum("kiqc,kjqc->qcij", grad, grad)
         stretch = np.sqrt(np.clip(np.linalg.eigvalsh(c), 0.0, None))
         x = mesh.points[:n_tissue] + u.values[:n_tissue]
-        face = face_at_rest + bar.displacement_mm()
-        along = (x - face) @ axis
-        lateral = np.linalg.norm((x - face) - np.outer(along, axis), axis=1)
-        inside = (along < 0.0) & (lateral <= problem.radius_mm)
-        held = along[under_bar] <= contact_gap
+        gap = bar_gap(x - (mesh.points[bar_point] + bar.displacement_mm()), axis, problem.radius_mm,
+                      problem.edge_radius_mm)[0]
         return {"smallest_jacobian": float(np.linalg.det(np.moveaxis(grad, (0, 1), (-2, -1))).min()),
                 "largest_strain": float(np.abs(stretch - 1.0).max()),
                 "floor_penetration_mm": float(max(0.0, floor_y - x[:, 1].min())),
-                "face_penetration_mm": float(max(0.0, -along[inside].min(initial=0.0))),
-                "held_beyond_rim_mm": float(max(0.0, (lateral[under_bar][held] - problem.radius_mm).max(initial=0.0)))}
+                "face_penetration_mm": float(max(0.0, -gap.min()))}
 
     frames = [measure()]
     saved = [u.values[:n_tissue].copy()]
     advance0 = float(bar.displacement_mm() @ axis)
     advance, force = [0.0], [0.0]
-    kinks = sorted({float(b) for b in problem.breakpoints_s if 0 < b < times[-1]} | set(times[1:].tolist()))
+    # the schedule's kinks within the run, and the output times (a kink within round-off of an
+    # output time is that time: else both are steps' ends, and the frame is saved twice)
+    kinks = sorted(set(times[1:].tolist()) | {float(b) for b in problem.breakpoints_s
+                                               if 0 < b < times[-1] and not np.isclose(times, b, rtol=0, atol=1e-9).any()})
     t = 0.0
     for target in kinks:
         while t < target - 1e-12:
@@ -382,7 +440,14 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
                     viscous.umat.kwargs["dtime_s"] = dt
                 inertia.start(dt)
                 if driven:
-                    boundaries["bar"].update(at_rest + float(problem.travel_mm(t + dt)) * axis)
+                    # the bar is put where its schedule takes it before Newton starts: given as a
+                    # prescribed increment, FElupe's line search judges it by the residual's
+                    # linearisation, which knows nothing of the contacts it opens or closes, and
+                    # rejected every step once the face had let go of the tissue (a release) or
+                    # not yet met it (docs/decisions.md, issue 41)
+                    bar_at = at_rest + float(problem.travel_mm(t + dt)) * axis
+                    boundaries["bar"].update(bar_at)
+                    u.values[bar_point] = bar_at
                 push = last_reaction if driven else float(problem.force_n(t + dt))
                 if solve(items, push):
                     inertia.accept()
@@ -409,15 +474,13 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
             displacement[f, p2.dof_xyz[:, c]] = values[:, c] * MM
     per_frame = {key: [f[key] for f in frames] for key in frames[0]}
     stats.update({"dofs": int(u.values.size), "tetrahedra": int(len(mesh.cells)), "wall_s": time.perf_counter() - started,
-                  "bar_nodes": int(len(under_bar)),
                   "advance_at_rest_mm": rest + touch + advance0,
                   "smallest_jacobian": min(per_frame["smallest_jacobian"]),
                   "largest_strain": max(per_frame["largest_strain"]),
                   "floor_penetration_mm": max(per_frame["floor_penetration_mm"]),
                   "face_penetration_mm": max(per_frame["face_penetration_mm"]),
-                  "held_beyond_rim_mm": max(per_frame["held_beyond_rim_mm"]),
                   "frames": per_frame})
     return CreepFESolution(times, displacement, np.asarray(advance), np.asarray(force), stats, p2)
 
 
-__all__ = ["FiniteStrainSettings", "finite_strain_reference"]
+__all__ = ["FiniteStrainSettings", "bar_gap", "finite_strain_reference"]
