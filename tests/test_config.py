@@ -154,6 +154,11 @@ def test_driven_protocols_drive_the_bar_and_force_protocols_refuse_a_driven_one(
     assert slide.bar.control == "travel" and slide.truth.solver == "finite_strain"
     assert slide.bar.travel_schedule()(end / 2) == pytest.approx(2.0)
     assert slide.bar.direction[0] == pytest.approx(0.5) and slide.bar.direction[1] == pytest.approx(-(3 ** 0.5) / 2)
+    stops = twin_config("slide", {"protocol": {"peak_travel_mm": 4.0, "ramp_s": 6.0}})
+    assert [stops.bar.travel_schedule()(t) for t in (3.0, 6.0, 9.0)] == pytest.approx([2.0, 4.0, 4.0])
+    assert 6.0 in stops.bar.breakpoints_s()
+    with pytest.raises(InputError, match="protocol.ramp_s"):
+        twin_config("slide", {"protocol": {"ramp_s": 30.0}})
     back = twin_config("drive_release", {"protocol": {"peak_travel_mm": 2.0, "ramp_s": 1.0, "hold_s": 3.0}})
     travel = back.bar.travel_schedule()
     assert [travel(t) for t in (0.5, 2.0, 4.5, 6.0)] == pytest.approx([1.0, 2.0, 1.0, 0.0])

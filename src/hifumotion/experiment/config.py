@@ -86,10 +86,10 @@ class TruthConfig(ConfigModel):
 class ProtocolConfig(ConfigModel):
     """How the bar pushes; sets the bar's schedule and direction (the preset names a therapy's protocol)."""
 
-    name: Literal["paper", "slow_push", "push_release", "oblique", "push_change", "slide", "drive_release", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; push_change: ramp then held, then the operator raises, lowers or lifts the push unannounced (setup.json tells only the ramp and hold); slide: the bar, tilted by angle_deg, driven along its axis at a steady rate over the whole run (travel control: the sample slides on the floor); drive_release: the bar driven in over ramp_s, held hold_s, drawn back over ramp_s (travel control: the tissue recovers); custom: the [bar] section as given")
+    name: Literal["paper", "slow_push", "push_release", "oblique", "push_change", "slide", "drive_release", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; push_change: ramp then held, then the operator raises, lowers or lifts the push unannounced (setup.json tells only the ramp and hold); slide: the bar, tilted by angle_deg, driven along its axis at a steady rate over ramp_s (default: the whole run), then held (travel control: the sample slides on the floor, and stops); drive_release: the bar driven in over ramp_s, held hold_s, drawn back over ramp_s (travel control: the tissue recovers); custom: the [bar] section as given")
     peak_force_n: float | None = Field(None, gt=0, description="the largest force in N (default: bar.force_n)")
     peak_travel_mm: float | None = Field(None, gt=0, description="slide, drive_release: the bar's largest travel along its axis in mm (default: bar.travel_mm)")
-    ramp_s: float | None = Field(None, ge=0, description="paper/oblique/push_release: duration of the rise in s (default: bar.ramp_s; push_release: 1.5 s)")
+    ramp_s: float | None = Field(None, ge=0, description="paper/oblique/push_release/drive_release: duration of the rise in s (default: bar.ramp_s; push_release, drive_release: 1.5 s); slide: how long the bar is driven before it stops (default: the whole run)")
     hold_s: float = Field(3.0, ge=0, description="push_release: time held at the peak in s")
     angle_deg: float = Field(25.0, ge=0, lt=60, description="oblique, slide: tilt of the bar from the vertical in degrees (in the x–y plane, pushing towards +x)")
     change_at_s: float | None = Field(None, gt=0, description="push_change: when the push starts to change, in s (default: 60 % of the run, after the paper's training frames)")
@@ -155,7 +155,12 @@ def _driven_bar(cfg: "TwinConfig", p: ProtocolConfig, end_s: float) -> BarConfig
     bar.update(control="travel", travel_mm=peak, schedule_force_n=None, direction=(0.0, -1.0, 0.0))
     if p.name == "slide":
         a = math.radians(p.angle_deg)
-        bar.update(schedule_times_s=[0.0, end_s], schedule_travel_mm=[0.0, peak], direction=(math.sin(a), -math.cos(a), 0.0))
+        stop = end_s if p.ramp_s is None else p.ramp_s
+        if not 0.0 < stop <= end_s:
+            raise InputError(f"a slide's drive must last more than 0 s and end within the run ({end_s:g} s), got {stop:g} s",
+                             "protocol.ramp_s")
+        times, travel = ([0.0, stop], [0.0, peak]) if stop == end_s else ([0.0, stop, end_s], [0.0, peak, peak])
+        bar.update(schedule_times_s=times, schedule_travel_mm=travel, direction=(math.sin(a), -math.cos(a), 0.0))
     else:   # drive_release
         ramp = p.ramp_s if p.ramp_s is not None else 1.5
         up, down = ramp, ramp + p.hold_s
