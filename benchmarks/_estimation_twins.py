@@ -83,7 +83,7 @@ LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
         "tissue": {"youngs_modulus_pa": 14000.0, "poisson_ratio": 0.46, "beta1": 3.0e5, "beta2": 0.45},
         "bar": {"radius_mm": 5.5, "edge_radius_mm": 0.8},
         "physics": {"friction": 0.1},
-        "protocol": {"peak_travel_mm": 6.0, "angle_deg": 30.0, "ramp_s": 8.0},
+        "protocol": {"peak_travel_mm": 4.5, "angle_deg": 30.0, "ramp_s": 8.0},
     }),
     "slide_stop_s49": ("slide", {
         "seed": 49,
@@ -91,7 +91,7 @@ LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
         "tissue": {"youngs_modulus_pa": 11000.0, "poisson_ratio": 0.45, "beta1": 2.0e5, "beta2": 0.55},
         "bar": {"radius_mm": 6.5, "edge_radius_mm": 0.3},
         "physics": {"friction": 0.2},
-        "protocol": {"peak_travel_mm": 5.0, "angle_deg": 40.0, "ramp_s": 7.0},
+        "protocol": {"peak_travel_mm": 7.0, "angle_deg": 40.0, "ramp_s": 7.25},
     }),
 }
 
