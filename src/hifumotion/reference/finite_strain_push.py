@@ -372,7 +372,6 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
         snapshot = u.values.copy()
         step = fem.Step(items, ramp={bar: np.array([0.0 if driven else force_n])}, boundaries=boundaries)
         job = fem.Job([step], plugins=[fem.LinesearchPlugin()])
-
         try:
             tol_n = s.newton_tol * max(abs(force_n) + weight_n, 1e-9)
             job.evaluate(tol=tol_n, verbose=0, solver=spsolve, check=_absolute_residual)
