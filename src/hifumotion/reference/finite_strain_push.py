@@ -258,31 +258,21 @@ def bar_gap(offsets_mm: np.ndarray, axis: np.ndarray, radius_mm: float, edge_rad
     return gap, normal, curvature
 
 
-def _bar_surface_class():
-    """:class:`_BarSurface`, made on first use (FElupe is an optional dependency)."""
-    global _BarSurface
-    if _BarSurface is None:
-        import felupe as fem
+def _bar_contact(field, points, centerpoint, axis, radius_mm: float, edge_radius_mm: float, **kwargs):
+    """The bar of :func:`bar_gap` as FElupe's rigid surface for its node-to-surface contact
+    (penalty, Coulomb friction) between ``points`` and the centre point of its end."""
+    import felupe as fem
 
-        class BarSurface(fem.mechanics.ContactRigidBase):
-            """The bar of :func:`bar_gap` as FElupe's rigid surface for its node-to-surface
-            contact (penalty, Coulomb friction), carried by the centre point of its end."""
+    if not 0.0 < edge_radius_mm <= radius_mm:
+        raise InputError(f"must be > 0 and at most the bar's radius ({radius_mm:g} mm), got {edge_radius_mm:g}",
+                         "edge_radius_mm")
+    shape = (np.asarray(axis, float), float(radius_mm), float(edge_radius_mm))
 
-            def __init__(self, field, points, centerpoint, axis, radius_mm, edge_radius_mm, **kwargs):
-                if not 0.0 < edge_radius_mm <= radius_mm:
-                    raise InputError(f"must be > 0 and at most the bar's radius ({radius_mm:g} mm), got "
-                                     f"{edge_radius_mm:g}", "edge_radius_mm")
-                self.shape = (np.asarray(axis, float), float(radius_mm), float(edge_radius_mm))
-                super().__init__(field, points, centerpoint, **kwargs)
+    class BarSurface(fem.mechanics.ContactRigidBase):
+        def _kinematics(self, dx):
+            return bar_gap(dx, *shape)
 
-            def _kinematics(self, dx):
-                return bar_gap(dx, *self.shape)
-
-        _BarSurface = BarSurface
-    return _BarSurface
-
-
-_BarSurface = None
+    return BarSurface(field, points, centerpoint, **kwargs)
 
 
 def _absolute_residual(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
@@ -349,9 +339,9 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     floor = fem.ContactRigidPlane(field, surface, floor_index, normal=[0.0, 1.0, 0.0], friction=problem.floor_friction,
                                   multiplier=s.contact_multiplier, items=[elastic], elastic_slip=s.elastic_slip_mm)
     # the bar against every surface node: a solid, it holds only what touches its face, rim or side
-    face = _bar_surface_class()(field, surface, bar_point, axis, problem.radius_mm, problem.edge_radius_mm,
-                                friction=problem.bar_friction, multiplier=s.face_contact_multiplier, items=[elastic],
-                                elastic_slip=s.elastic_slip_mm)
+    face = _bar_contact(field, surface, bar_point, axis, problem.radius_mm, problem.edge_radius_mm,
+                        friction=problem.bar_friction, multiplier=s.face_contact_multiplier, items=[elastic],
+                        elastic_slip=s.elastic_slip_mm)
     # the tissue's stiffness under a punch of the bar's radius, 2 E a / (1 − ν²) (N/mm)
     punch = 2.0 * problem.youngs_modulus_pa * PA_TO_MPA * problem.radius_mm / (1.0 - problem.poisson_ratio ** 2)
     bar = _Bar(field, bar_point, axis, punch, face)
