@@ -245,6 +245,41 @@ def test_a_block_pushed_along_a_rough_floor_sticks_below_coulombs_limit_and_slid
             assert r.bar_force_n[-1] == pytest.approx(force, rel=1e-6)
 
 
+@pytest.mark.parametrize("angle_deg, floor_mu, face_mu", [(35.0, 0.15, 0.15), (45.0, 0.3, 0.2), (30.0, 0.1, 0.3)])
+def test_a_tilted_bar_drives_a_stiff_block_along_a_rough_floor_as_a_rigid_wedge(angle_deg, floor_mu, face_mu):
+    # a slide's statics and kinematics in closed form: a stiff cube whose top edge is driven by
+    # a bar tilted θ from the vertical, along its axis a = (sin θ, −cos θ). A rigid block on the
+    # floor keeps the face's normal gap closed only by sliding: dx = dδ / sin θ. It slides up
+    # the face (relative to the bar) along t = (cos θ, sin θ), so the face's friction on it is
+    # −μ_b P t, the floor's −μ_f N; the horizontal and vertical balances give
+    # P = μ_f W / (sin θ − μ_b cos θ − μ_f (cos θ + μ_b sin θ))
+    n, rho, g, e = 4, 1000.0, 9.81, 1e6
+    theta = math.radians(angle_deg)
+    side = n * MM
+    weight = rho * side ** 3 * g
+    axis = np.array([math.sin(theta), -math.cos(theta), 0.0])
+    along_face = np.array([math.cos(theta), math.sin(theta), 0.0])
+    radius = 5 * MM
+    top_edge = np.array([0.0, side, side / 2])
+    # the face's centre behind the edge, so the edge stays on the flat face as it slides up it
+    tip = top_edge - 0.5 * radius * along_face - 0.05 * MM * axis
+    travel_m = 1.0 * MM
+    punch = Punch(tuple(tip), tuple(axis), radius, lambda t: 0.0, face_mu, (), travel_m=lambda t: travel_m * t)
+    mesh = voxel_mesh(block(n), 1.0)
+    solver = CreepSolver(mesh, CreepMaterial(e, 0.3, beta1=0.0, density_kg_m3=rho), Surroundings((0.0, -g, 0.0)),
+                         [Plane((0, 0, 0), (0, 1, 0), floor_mu)], punch, CreepSettings(tolerance=1e-4))
+    r = solver.run(np.linspace(0.0, 1.0, 6))
+    x_mm = (r.nodes_mm[:, :, 0] - mesh.nodes_mm[None, :, 0]).mean(1)
+    sliding = slice(2, None)          # past the elastic stick's onset
+    rate = np.polyfit(r.advance_mm[sliding], x_mm[sliding], 1)[0]
+    assert rate == pytest.approx(1.0 / math.sin(theta), rel=1e-3)
+    push = floor_mu * weight / (math.sin(theta) - face_mu * math.cos(theta)
+                                - floor_mu * (math.cos(theta) + face_mu * math.sin(theta)))
+    np.testing.assert_allclose(r.bar_force_n[sliding], push, rtol=1e-3)
+    # and nothing tips it: the block's bottom stays on the floor
+    assert np.abs(r.nodes_mm[-1][mesh.nodes_mm[:, 1] < 1e-9, 1]).max() < 1e-3
+
+
 def test_the_blockwise_reduction_is_the_sparse_product():
     """The reduced matrix built node block by node block (creep/reduce.py) against Tᵀ A T by
     SciPy's sparse products, for free nodes, sliding contacts on a floor and a tilted bar
