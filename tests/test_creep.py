@@ -147,10 +147,12 @@ def test_fast_path_agrees_with_the_finite_element_reference():
     u_fast = sim.tissue_mm[-1] - mesh.centres_mm
     u_ref = ref.at(mesh.centres_mm)
     rms = math.sqrt(((u_fast - u_ref) ** 2).sum(1).mean())
-    # measured 0.154 of the peak at 2 mm: 0.14 with a sharp-edged bar, the reference's, and 0.154
-    # with the model's rim rounded at half a spacing (1 mm of the 6 mm bar here; docs/decisions.md,
-    # issue 41, session 27); benchmarks/bench_fe_reference.py: it falls as the spacing does
-    assert rms <= 0.16 * np.linalg.norm(u_ref, axis=1).max()
+    # measured 0.036 of the peak at 2 mm (0.032 at 2.2 mm), with the model's rim rounded at half a
+    # spacing (1 mm of the 6 mm bar here). Before session 29 it was 0.154: the boundary voxels
+    # were left a staircase where conforming them would flatten them below ⅕ of a cube, and the
+    # settled ellipsoid, resting on two floor nodes, leaned 0.7 mm (its soft mode left by the
+    # contact rounds' loose solve) — docs/decisions.md, "The voxels meet the surface"
+    assert rms <= 0.05 * np.linalg.norm(u_ref, axis=1).max()
 
 
 def test_reference_uniaxial_box():
