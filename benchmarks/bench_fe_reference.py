@@ -60,6 +60,9 @@ def main() -> None:
         creep_settings = CreepSettings(bar_edge_spacings=args.edge_spacings)
     scene = Scene()
     scene.tissue = scene.tissue.model_copy(update={"beta1": 0.0})
+    if args.edge_spacings == 0:
+        # the reference's sharp edge: the bar's own rounding would otherwise round it (0.5 mm)
+        scene.bar = scene.bar.model_copy(update={"edge_radius_mm": 1e-9})
     scene.physics.friction = 3.0   # rough: the stuck reference's limit (tests/test_creep.py says why not 100)
     scene.run.duration_s, scene.run.output_interval_s = 1.0, 0.5
     counts = [int(c) for c in args.particles.split(",")]

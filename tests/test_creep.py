@@ -604,3 +604,15 @@ def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snaps
         assert r.nodes_mm[..., 1].min() >= -1e-3 * scene.particles.spacing_mm     # nothing through the floor
         assert r.stats["contact_solves"] > 0
         assert (r.stats["viscous_voxels"] < len(mesh.elements)) == hyper
+
+
+@pytest.mark.parametrize("own_mm, expected_mm", [(None, 0.5), (0.1, 0.5), (0.8, 0.8), (20.0, 5.0)])
+def test_the_bars_rim_is_rounded_at_its_own_edge_or_half_a_spacing_whichever_is_rounder(own_mm, expected_mm):
+    # a voxel mesh cannot see an edge sharper than about half its spacing (1 mm here); a bar
+    # machined rounder than that is rounded as it is; no rounding exceeds the bar's radius (5 mm)
+    mesh = voxel_mesh(block(3), 1.0)
+    punch = Punch((1.5 * MM, 3 * MM, 1.5 * MM), (0.0, -1.0, 0.0), 5 * MM, lambda t: 0.0, 0.0,
+                  edge_radius_m=None if own_mm is None else own_mm * MM)
+    solver = CreepSolver(mesh, CreepMaterial(1e4, 0.3), Surroundings((0.0, 0.0, 0.0)),
+                         [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch)
+    assert solver.punch.edge_radius_m == pytest.approx(expected_mm * MM)

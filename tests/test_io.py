@@ -396,3 +396,11 @@ def test_output_path_through_a_missing_folder_is_checked_where_it_resolves(tmp_p
             pass
     assert notes.read_text() == "mine" and (kept / "data.csv").read_text() == "mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["kept", "notes.txt"]
+
+
+def test_a_bar_rounded_beyond_its_radius_is_refused_naming_the_field():
+    from hifumotion.observed.setup import BarSetup
+
+    with pytest.raises(Exception, match="edge_radius_mm"):
+        BarSetup(radius_mm=3.0, edge_radius_mm=4.0, tip_at_rest_mm=(0.0, 0.0, 0.0))
+    assert BarSetup(tip_at_rest_mm=(0.0, 0.0, 0.0)).edge_radius_mm == 0.5   # a setup.json written before has none

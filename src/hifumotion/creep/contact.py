@@ -119,8 +119,9 @@ class Plane:
 class Punch:
     """The bar's flat end: a disc of ``radius_m`` at ``tip_m``, pushed along unit ``axis``.
 
-    ``edge_radius_m``: the rim's rounding (m; None: the solver's, ``CreepSettings.bar_edge_spacings``
-    spacings — a voxel mesh cannot see a sharper edge). ``force_n(t)`` is the push (N) at time t
+    ``edge_radius_m``: the bar's own rounding of its rim (m; None: not known). The solver rounds
+    the rim at the larger of it and ``CreepSettings.bar_edge_spacings`` spacings — a voxel mesh
+    cannot see a sharper edge. ``force_n(t)`` is the push (N) at time t
     (s); ``breakpoints_s`` the times where the schedule bends (the integrator lands a step on each). With ``travel_m`` (travel control)
     the bar is driven instead: its end is ``travel_m(t)`` (m) along the axis beyond where it
     rests on the settled tissue, ``force_n`` is not read, and the force it takes is a result.

@@ -152,9 +152,12 @@ class CreepSolver:
         for c in range(3):
             np.add.at(self.body_force[:, c], mesh.elements.ravel(), np.repeat(weight * grav[c] / 8.0, 8))
         self.diag_index = np.flatnonzero(rows == self.assembly.indices)
-        if punch is not None and punch.edge_radius_m is None:
-            # the rim rounded at the mesh's resolution (contact.py: why the edge is rounded)
-            punch = replace(punch, edge_radius_m=min(self.settings.bar_edge_spacings * self.dx_m, punch.radius_m))
+        if punch is not None:
+            # the rim rounded at the bar's own edge or at the mesh's resolution, whichever is the
+            # rounder (contact.py: why the edge is rounded; docs/decisions.md, issue 41, session 29)
+            own = punch.edge_radius_m or 0.0
+            punch = replace(punch, edge_radius_m=min(max(own, self.settings.bar_edge_spacings * self.dx_m),
+                                                     punch.radius_m))
         self.contacts = ContactSet(self.rest_m, planes, punch)
         self.punch = punch
         self._fixed_pattern()

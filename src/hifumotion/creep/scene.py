@@ -60,7 +60,7 @@ def scene_punch(scene: Scene, tissue_mm: np.ndarray, spacing_mm: float) -> tuple
         # a driven bar: where it is, not what it weighs, is given (its guide carries the rest)
         travel_mm = bar.travel_schedule()
         return Punch(tuple(tip * MM), tuple(axis), bar.radius_mm * MM, lambda t: 0.0, scene.physics.friction, breaks,
-                     travel_m=lambda t: float(travel_mm(t)) * MM), axis
+                     travel_m=lambda t: float(travel_mm(t)) * MM, edge_radius_m=bar.edge_radius_mm * MM), axis
     schedule = bar.schedule()
     extra = 0.0
     if not bar.weight_supported:
@@ -72,7 +72,8 @@ def scene_punch(scene: Scene, tissue_mm: np.ndarray, spacing_mm: float) -> tuple
     def force(t: float) -> float:
         return max(float(schedule(t)) + extra, 0.0)
 
-    return Punch(tuple(tip * MM), tuple(axis), bar.radius_mm * MM, force, scene.physics.friction, breaks), axis
+    return Punch(tuple(tip * MM), tuple(axis), bar.radius_mm * MM, force, scene.physics.friction, breaks,
+                 edge_radius_m=bar.edge_radius_mm * MM), axis
 
 
 def tissue_surface(scene: Scene):

@@ -179,7 +179,7 @@ def model_spec(observation, settings: ModelSettings | None = None) -> ModelSpec:
     tank = TankConfig(size_mm=setup.tank.size_mm, water_depth_mm=setup.tank.water_depth_mm)
     bar = BarConfig(enabled=b.enabled, radius_mm=b.radius_mm, length_mm=b.length_mm, direction=b.direction,
                     tip_mm=tuple(float(c) for c in (b.tip_at_rest_mm if tip is None else tip)),
-                    weight_supported=b.weight_supported,
+                    weight_supported=b.weight_supported, edge_radius_mm=b.edge_radius_mm,
                     **push_fields(setup.push, Parameters().force_n, s.force_ramp_s))
     tissue_cfg = TissueConfig(density_kg_m3=s.tissue_density_kg_m3, rate_floor_per_s=s.rate_floor_per_s,
                               shape="particles", particles_csv="tissue_particles.csv",

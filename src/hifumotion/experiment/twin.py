@@ -288,7 +288,7 @@ def operator_setup(cfg: TwinConfig, probe: im.Probe, tip_mm: np.ndarray, axis: n
         bar=BarSetup(enabled=cfg.bar.enabled, radius_mm=cfg.bar.radius_mm, length_mm=cfg.bar.length_mm,
                      direction=tuple(np.asarray(axis).tolist()), tip_at_rest_mm=tuple(np.asarray(tip_mm).tolist())
                      if cfg.bar.enabled else tuple(0.5 * np.asarray(cfg.tank.size_mm)),
-                     weight_supported=cfg.bar.weight_supported),
+                     weight_supported=cfg.bar.weight_supported, edge_radius_mm=cfg.bar.edge_radius_mm),
         push=push_shape(cfg.bar, cfg.protocol))
 
 

@@ -76,6 +76,13 @@ class BarSetup(ConfigModel):
     direction: Vector3 = Field((0.0, -1.0, 0.0), description="direction the bar pushes along (normalised on reading)")
     tip_at_rest_mm: Vector3 = Field(description="pool position of the bar's tip before the push, mm")
     weight_supported: bool = Field(True, description="a hand carries the bar's weight")
+    edge_radius_mm: float = Field(0.5, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the model rounds its rim at the larger of this and half a voxel spacing")
+
+    @model_validator(mode="after")
+    def _edge_within_radius(self):
+        if self.edge_radius_mm > self.radius_mm:
+            raise ValueError(f"edge_radius_mm ({self.edge_radius_mm:g}) must be at most radius_mm ({self.radius_mm:g})")
+        return self
 
     @field_validator("direction")
     @classmethod

@@ -98,7 +98,7 @@ class BarConfig(ConfigModel):
     enabled: bool = Field(True, description="whether there is a pushing bar")
     radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar (its flat pushing end) in mm")
     length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
-    edge_radius_mm: float = Field(0.5, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the finite-strain truth's bar is this solid, the particle and small-strain paths push with the end's flat disc")
+    edge_radius_mm: float = Field(0.5, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the finite-strain truth's bar is this solid; the fast path rounds its rim at the larger of this and half a voxel spacing; the particle path and the small-strain truth push with the end's flat disc")
     direction: tuple[float, float, float] = Field((0.0, -1.0, 0.0), description="unit vector the bar points and pushes along (default: down onto the tissue)")
     tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: touching the tissue (one spacing from the first tissue particle under its end face), on the axis through the tissue's centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
