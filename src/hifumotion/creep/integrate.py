@@ -324,6 +324,13 @@ class CreepSolver:
                 q = self._factorise(reduced, rhs_q, self.settings.cg_rtol)
         return t @ q + g, (q[s_col] if s_col >= 0 else None)
 
+    def _polished(self, a: sp.csr_matrix, base: np.ndarray, unloaded: bool):
+        """The last round's system solved to full accuracy (:meth:`_polish`) with the bar placed:
+        the displacement (m) flat and ``(n, 3)``, and the constraints' reactions (N, ``(n, 3)``)."""
+        new, s = self._polish()
+        self._place_bar(new, s, unloaded)
+        return new, new.reshape(-1, 3), (a @ new - base).reshape(-1, 3)
+
     def _factorise(self, reduced: sp.csr_matrix, rhs_q: np.ndarray, rtol: float) -> np.ndarray:
         """A fresh factorisation of ``reduced`` (in the last one's place: the analysis is kept on
         the same pattern) and the solution of ``rhs_q`` to a relative residual ``rtol``."""
@@ -475,21 +482,16 @@ class CreepSolver:
                 # the round's system solved to full accuracy: a soft mode (a body held by a few
                 # contacts, as a round-bottomed sample on two floor nodes) can move far between
                 # the round's looser solve and this one, and take nodes through a surface
-                new, s = self._polish()
-                self._place_bar(new, s, unloaded)
-                unew = new.reshape(-1, 3)
-                if not cs.update(unew, (a @ new - base).reshape(-1, 3), self.advance_m, tol,
-                                 LEFT_TOLERANCE * self.dx_m):
+                new, unew, reaction = self._polished(a, base, unloaded)
+                if not cs.update(unew, reaction, self.advance_m, tol, LEFT_TOLERANCE * self.dx_m):
                     break
                 self.stats["polish_rounds"] += 1
                 guess = new
             elif not changed:
                 self.stats["friction_rounds"] += 1
         else:
-            new, s = self._polish()
-            unew = new.reshape(-1, 3)
-            self._place_bar(new, s, unloaded)
-        cs.record_pressure((a @ new - base).reshape(-1, 3))
+            new, unew, reaction = self._polished(a, base, unloaded)
+        cs.record_pressure(reaction)
         cs.slide(unew, self.settings.stick_mm * MM)
         taken = cs.bar_force() if self.punch is not None else 0.0
         if self.punch is not None:   # after the force: its reactions are on the planes just solved
