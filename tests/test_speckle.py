@@ -98,8 +98,9 @@ def _bar_scene(scatterers, bar_shift_px: float):
 
 
 def test_the_bar_never_carries_tissue_displacement(scatterers):
-    """A bright bar moves 12 px towards motionless tissue and over its top rows: the bar's pixels
-    have no displacement, the tissue none of the bar's motion, and the bar's path is tracked."""
+    """A bright bar moves 30 px towards motionless tissue and over its top rows: the bar's pixels
+    have no displacement, the tissue it does not reach none of the bar's motion, the tissue it
+    covers is kept at its face (no material inside a solid), and the bar's path is tracked."""
     steps = np.linspace(0.0, 30.0, 16)
     frames = np.stack([_bar_scene(scatterers, s) for s in steps])
     rows, cols = np.mgrid[0:SHAPE[0], 0:SHAPE[1]]
@@ -107,8 +108,14 @@ def test_the_bar_never_carries_tissue_displacement(scatterers):
     series = displacement(frames, PX, rigid=bar)
     assert np.isnan(series.displacement_mm[:, bar]).all()
     tissue = (rows < 66) & (rows > 8) & (cols > 8) & (cols < SHAPE[1] - 8)
-    moved = np.linalg.norm(series.displacement_mm[-1][tissue], axis=-1) / PX
+    # the bar ends with its face at row 60 (its pixels' edge at 59.5) over columns 40-87
+    reached = (rows >= 58) & (cols >= 38) & (cols < 90)
+    moved = np.linalg.norm(series.displacement_mm[-1][tissue & ~reached], axis=-1) / PX
     assert np.percentile(moved, 99) < 0.25           # the tissue stays put (the bar came 30 px)
+    covered = tissue & (rows >= 61) & (cols >= 42) & (cols < 86)
+    now_row = rows[covered] + series.displacement_mm[-1][covered][:, 1] / PX
+    assert now_row.max() <= 59.5 + 0.25              # none of it is left inside the bar
+    assert now_row.min() >= 59.5 - 1.0               # and none is thrown past its face
     assert series.rigid_shift_mm[-1] / PX == pytest.approx([0.0, -30.0], abs=0.2)
 
 

@@ -19,7 +19,10 @@ frame 0 has gone by frame ``t`` (``x = X + u_t(X)``). Per frame (:func:`displace
 3. **grade and fill**: each pixel's *quality* is the local normalised cross-correlation
    of the reference with frame ``t`` pulled back through the estimate; tissue under a
    solid in frame ``t`` (occluded) gets quality 0; a quality-weighted normalised
-   convolution at the speckle's scale smooths the field and fills what was not seen.
+   convolution at the speckle's scale smooths the field and fills what was not seen;
+4. **keep the material out of the solids**: a point the field puts inside a solid (the bar
+   where it is now, the floor) goes to the solid's surface — the fill under a pushing bar
+   lags the push, and no tissue can be where the bar is.
 
 Pixels of the solids on frame 0 carry no displacement (NaN) and quality 0.
 """
@@ -311,8 +314,10 @@ class SpeckleTracker:
     def __init__(self, frame0: np.ndarray, spacing_mm, *, exclude: np.ndarray | None = None,
                  rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
                  keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane", lk_iterations: int = 1,
-                 lk_window: float = LK_WINDOW):
+                 lk_window: float = LK_WINDOW, keep_out_of_solids: bool = True):
         import cv2
+
+        from hifumotion.speckle._solid_surface import SolidSurface
 
         from hifumotion.observed.solids import measure_bloom_px
         from hifumotion.speckle._speckle_size import speckle_fwhm_px
@@ -354,6 +359,9 @@ class SpeckleTracker:
             if max(bloom) > 0:
                 self.element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * bloom[1] + 1, 2 * bloom[0] + 1))
         self.rigid_tracker = RigidTracker(frame0, rigid) if rigid is not None else None
+        # the solids themselves (not their bloom), which no material can enter
+        self.rigid_surface = SolidSurface(rigid) if keep_out_of_solids and rigid is not None else None
+        self.static_surface = SolidSurface(static) if keep_out_of_solids and static.any() else None
         self.grown_static = _grow(static, self.element) if static.any() else static   # it does not move
         self.gx, self.gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
         self.frames_seen = 1
@@ -426,6 +434,7 @@ class SpeckleTracker:
             mx, my = gx + self.u_key[..., 0], gy + self.u_key[..., 1]
             out = self.u_key + _remap(v, mx, my)
             quality = np.sqrt(np.clip(_remap(weight, mx, my), 0.0, 1.0))
+        out = self._outside_solids(out, shift)
         self.v = v
         self.rigid_shift_px = np.asarray(shift, np.float32)
         t = self.frames_seen
@@ -448,6 +457,20 @@ class SpeckleTracker:
         quality[self.solid0] = 0.0
         return disp, quality
 
+    def _outside_solids(self, out: np.ndarray, shift: np.ndarray) -> np.ndarray:
+        """Frame 0 → current displacement (px) with the material it puts inside a solid (the bar
+        where it is now, the static ones) moved to the solid's surface
+        (:mod:`~hifumotion.speckle._solid_surface`)."""
+        if self.rigid_surface is None and self.static_surface is None:
+            return out
+        x, y = self.gx + out[..., 0], self.gy + out[..., 1]
+        if self.rigid_surface is not None:
+            # what the bar covers it pushed ahead of it, along its motion
+            x, y = self.rigid_surface.push_out(x, y, shift, along=shift)
+        if self.static_surface is not None:
+            x, y = self.static_surface.push_out(x, y)
+        return np.dstack([x - self.gx, y - self.gy])
+
     @property
     def rigid_shift_mm(self) -> np.ndarray | None:
         """The rigid solid's translation (x, y) from frame 0 in mm at the last frame; None without one."""
@@ -460,7 +483,8 @@ class SpeckleTracker:
 def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | None = None,
                  rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
                  keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane", lk_iterations: int = 1,
-                 lk_window: float = LK_WINDOW, progress: bool = False) -> DisplacementSeries:
+                 lk_window: float = LK_WINDOW, keep_out_of_solids: bool = True,
+                 progress: bool = False) -> DisplacementSeries:
     """Track the speckle of a cine loop: the displacement of frame 0's material points at every frame.
 
     Each frame is registered directly to the current reference frame (frame 0, or the
@@ -505,6 +529,11 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         the visible tissue around it, so the push's compression carries on under the bar;
         ``"mean"`` only the normalised convolution's weighted mean (about 30 % faster, and
         15–25 % less accurate on the twins: docs/decisions.md).
+    keep_out_of_solids
+        Move material the field puts inside a solid (the bar where it is in that frame, the
+        static ones; not their bloom) onto the solid's surface along its normal (default):
+        under a pushing bar the fill from the visible tissue lags the push, and no tissue can
+        be where the bar is (:mod:`~hifumotion.speckle._solid_surface`). Quality is unchanged.
     progress
         Show a progress bar.
 
@@ -527,7 +556,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     frames = unit_frames(frames)
     tracker = SpeckleTracker(frames[0], spacing_mm, exclude=exclude, rigid=rigid, estimator=estimator,
                              smoothing=smoothing, keyframe_quality=keyframe_quality, fill=fill,
-                             lk_iterations=lk_iterations, lk_window=lk_window)
+                             lk_iterations=lk_iterations, lk_window=lk_window,
+                             keep_out_of_solids=keep_out_of_solids)
     t_count, h, w = frames.shape
     out = np.zeros((t_count, h, w, 2), np.float32)
     quality = np.zeros((t_count, h, w), np.float32)

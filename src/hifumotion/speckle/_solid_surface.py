@@ -1,0 +1,78 @@
+"""No material inside a known solid: tracked points that the field carried into one go back to its surface.
+
+Tissue the bar covers in a frame is occluded: its displacement is filled from the visible tissue
+around it, which does not see the bar's own motion. Under a pushing bar that fill lags the
+push — on the ``push_change`` twins the top of the tracked section moved 0.4 mm where the bar
+moved 1.9 mm and the tissue under it 1.5 mm, and the section's centroid was 0.17 mm off
+(docs/decisions.md, "Tissue cannot enter the bar"). Whatever the fill says, material cannot be
+inside a solid, so a point the field puts there is moved to the solid's surface: a moving
+solid's along its motion (the bar's advance pushed it there), a static one's along its
+normal. It is a bound, not a measurement — a point the bar has not reached keeps the fill's
+value, and the point's quality stays what the speckle said.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class SolidSurface:
+    """A solid's frame-0 mask as a signed distance and a unit normal, on the pixel grid.
+
+    ``distance_px`` is negative inside the solid, positive outside and zero on the mask's pixel
+    edges; ``normal`` points out of the solid (unit, (x, y)).
+    """
+
+    def __init__(self, mask: np.ndarray):
+        from scipy import ndimage
+
+        mask = np.asarray(mask, bool)
+        outside = ndimage.distance_transform_edt(~mask) - 0.5
+        inside = ndimage.distance_transform_edt(mask) - 0.5
+        self.distance_px = np.where(mask, -inside, outside).astype(np.float32)
+        gy, gx = np.gradient(self.distance_px)
+        norm = np.hypot(gx, gy)
+        norm[norm == 0] = 1.0
+        self.normal = (np.ascontiguousarray(gx / norm, np.float32), np.ascontiguousarray(gy / norm, np.float32))
+
+    def push_out(self, x_px: np.ndarray, y_px: np.ndarray, shift_px=(0.0, 0.0), along=None,
+                 iterations: int = 4) -> tuple[np.ndarray, np.ndarray]:
+        """Positions ``(x, y)`` (px, arrays of one shape) with those inside the solid — translated
+        by ``shift_px`` (x, y) from frame 0 — moved onto its surface.
+
+        ``along``: the direction (x, y) a moving solid pushes what it meets (its motion); a point
+        inside goes that way until it is out, as the solid's advance would have carried it
+        (sphere tracing: each step is the point's depth, which cannot cross the surface).
+        Without it, or for a point still inside after ``iterations`` steps, along the solid's
+        normal: the nearest surface."""
+        import cv2
+
+        sx, sy = float(shift_px[0]), float(shift_px[1])
+        shape = np.shape(x_px)
+        # OpenCV samples on 2-D maps: a list of points is one column
+        x = np.ascontiguousarray(x_px, np.float32).reshape(shape if len(shape) == 2 else (-1, 1))
+        y = np.ascontiguousarray(y_px, np.float32).reshape(x.shape)
+
+        def sample(image, mx, my):
+            return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+        direction = None
+        if along is not None and np.hypot(*along) > 0:
+            direction = np.asarray(along, np.float32) / np.float32(np.hypot(*along))
+        steps = [direction] * iterations + [None, None]
+        for d in (steps if direction is not None else [None, None]):
+            mx, my = x - np.float32(sx), y - np.float32(sy)
+            depth = sample(self.distance_px, mx, my)
+            inside = depth < 0
+            if not inside.any():
+                break
+            if d is None:
+                dx, dy = sample(self.normal[0], mx, my), sample(self.normal[1], mx, my)
+            else:
+                dx, dy = d
+            x = np.where(inside, x - depth * dx, x)
+            y = np.where(inside, y - depth * dy, y)
+        return x.reshape(shape), y.reshape(shape)
+
+
+__all__ = ["SolidSurface"]
