@@ -27,6 +27,10 @@ class SolidSurface:
         from scipy import ndimage
 
         mask = np.asarray(mask, bool)
+        rows, cols = np.nonzero(mask)
+        self.shape = mask.shape
+        #: the mask's bounding box (first row, last row + 1, first column, last column + 1)
+        self.box = (int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1)
         outside = ndimage.distance_transform_edt(~mask) - 0.5
         inside = ndimage.distance_transform_edt(mask) - 0.5
         self.distance_px = np.where(mask, -inside, outside).astype(np.float32)
@@ -73,6 +77,31 @@ class SolidSurface:
             x = np.where(inside, x - depth * dx, x)
             y = np.where(inside, y - depth * dy, y)
         return x.reshape(shape), y.reshape(shape)
+
+    def keep_out(self, displacement_px: np.ndarray, shift_px=(0.0, 0.0), along=None) -> np.ndarray:
+        """A field ``(H, W, 2)`` (px, (x, y)) of frame-0 pixels' displacement with the material it
+        carries inside the solid (translated by ``shift_px``) moved onto its surface
+        (:meth:`push_out`). Only the pixels that can reach the solid — its box, moved and grown
+        by the field's largest displacement — are looked at: the solid is small beside the frame."""
+        reach = int(np.ceil(float(np.abs(displacement_px).max(initial=0.0)))) + 2
+        h, w = self.shape
+        sx, sy = int(np.floor(shift_px[0])), int(np.floor(shift_px[1]))
+        r0, r1 = max(self.box[0] + sy - reach, 0), min(self.box[1] + sy + reach + 1, h)
+        c0, c1 = max(self.box[2] + sx - reach, 0), min(self.box[3] + sx + reach + 1, w)
+        if r0 >= r1 or c0 >= c1:
+            return displacement_px
+        sub = displacement_px[r0:r1, c0:c1]
+        gy, gx = np.mgrid[r0:r1, c0:c1].astype(np.float32)
+        x0, y0 = gx + sub[..., 0], gy + sub[..., 1]
+        x, y = self.push_out(x0, y0, shift_px, along)
+        moved = (x != x0) | (y != y0)
+        if not moved.any():
+            return displacement_px
+        out = displacement_px.copy()
+        # only the moved pixels are written: the others keep their values to the last bit
+        out[r0:r1, c0:c1, 0] = np.where(moved, x - gx, sub[..., 0])
+        out[r0:r1, c0:c1, 1] = np.where(moved, y - gy, sub[..., 1])
+        return out
 
 
 __all__ = ["SolidSurface"]

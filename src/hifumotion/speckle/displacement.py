@@ -461,15 +461,12 @@ class SpeckleTracker:
         """Frame 0 → current displacement (px) with the material it puts inside a solid (the bar
         where it is now, the static ones) moved to the solid's surface
         (:mod:`~hifumotion.speckle._solid_surface`)."""
-        if self.rigid_surface is None and self.static_surface is None:
-            return out
-        x, y = self.gx + out[..., 0], self.gy + out[..., 1]
         if self.rigid_surface is not None:
             # what the bar covers it pushed ahead of it, along its motion
-            x, y = self.rigid_surface.push_out(x, y, shift, along=shift)
+            out = self.rigid_surface.keep_out(out, shift, along=shift)
         if self.static_surface is not None:
-            x, y = self.static_surface.push_out(x, y)
-        return np.dstack([x - self.gx, y - self.gy])
+            out = self.static_surface.keep_out(out)
+        return out
 
     @property
     def rigid_shift_mm(self) -> np.ndarray | None:
