@@ -296,11 +296,13 @@ def run_twin(folder: Path, estimators: list[str]) -> dict:
               "displacement": {}, "contours": {}}
     cv2.setNumThreads(1)
     for name in estimators:
-        series = displacement(frames, px, exclude=solids.floor, rigid=solids.bar, estimator=name)
+        series = displacement(frames, px, exclude=solids.floor, rigid=solids.bar, estimator=name,
+                              exclude_distance_px=solids.floor_distance_px, rigid_distance_px=solids.bar_distance_px)
         result["displacement"][name] = displacement_errors(series, truth, visible)
         if name == estimators[0]:
             result["displacement_by_strain"] = displacement_by_strain(series, truth)
-    series = displacement(frames, px, exclude=solids.floor, rigid=solids.bar, fill="mean")
+    series = displacement(frames, px, exclude=solids.floor, rigid=solids.bar, fill="mean",
+                          exclude_distance_px=solids.floor_distance_px, rigid_distance_px=solids.bar_distance_px)
     result["displacement"][f"{estimators[0]}, fill=mean"] = displacement_errors(series, truth, visible)
     # the floor of any tracker of these images: the true frame-0 contour carried by the true in-plane
     # displacement (what the speckle shows) against the true section (which out-of-plane motion changes too)

@@ -41,6 +41,8 @@ def _solids_from_files(setup: Optional[Path], exclude: Optional[Path], bar: Opti
             target |= m
     if not floor.any() and not rigid.any():
         return None
+    if setup is not None and exclude is None and bar is None:
+        return known     # the setup's geometry alone: its surfaces to a fraction of a pixel
     return Solids(floor, rigid & ~floor)
 
 
@@ -108,7 +110,10 @@ def track(
     with output_folder(output, overwrite, inputs=(source, init, setup, exclude, bar)) as out:
         with record.stage("speckle tracking"):
             series = displacement(seq.frames, seq.spacing_mm, exclude=None if solids is None else solids.floor,
-                                  rigid=None if solids is None else solids.bar, estimator=estimator, progress=True)
+                                  rigid=None if solids is None else solids.bar,
+                                  exclude_distance_px=None if solids is None else solids.floor_distance_px,
+                                  rigid_distance_px=None if solids is None else solids.bar_distance_px,
+                                  estimator=estimator, progress=True)
         with record.stage("contours"):
             result = follow(seq.frames, start, seq.spacing_mm, solids=solids, boundary_offset_mm=boundary_offset,
                             method=method, series=series)

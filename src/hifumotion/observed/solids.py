@@ -22,11 +22,16 @@ class Solids:
     """Frame-0 pixels of the known solids, bool ``(H, W)`` each.
 
     ``floor``: below the pool's floor (static); ``bar``: inside the resting bar (moves
-    rigidly with the push).
+    rigidly with the push). ``floor_distance_px``/``bar_distance_px``: where the geometry is
+    known (:func:`known_solids`), each solid's signed distance at the pixel centres (px,
+    negative inside; without a margin, ``mask == (distance <= 0)``): its surface to a fraction
+    of a pixel, where a mask knows it to half a pixel — a tilted face's mask is a staircase.
     """
 
     floor: np.ndarray
     bar: np.ndarray
+    floor_distance_px: np.ndarray | None = None
+    bar_distance_px: np.ndarray | None = None
 
     @property
     def any(self) -> np.ndarray:
@@ -42,11 +47,19 @@ def imaging_plane(setup: Setup, z_mm: float | None = None) -> Plane:
 
 
 def known_solids(plane: Plane, setup: Setup, bar_margin_mm: float = 0.0) -> Solids:
-    """The pixels of ``plane`` below the pool's floor (y < 0) and inside the resting bar,
-    grown by ``bar_margin_mm`` along its axis and radius."""
+    """The pixels of ``plane`` below the pool's floor (y < 0) and inside the resting bar, grown
+    by ``bar_margin_mm``, with their signed distances (px).
+
+    The bar is taken with a sharp rim (``edge_radius_mm`` is the model's): rounding its mask by
+    the edge radius moved 7 pixels of ``slide_stop_s48``'s bar and its carried contour's
+    centroid by 0.06 mm through frame 0's bloom measure (docs/decisions.md, "Tissue cannot
+    enter the bar"), so the masks stay what they were."""
     pts = plane.points_mm()
-    floor = pts[..., 1] < 0.0
+    px = float(plane.pixel_mm)
+    floor_mm = pts[..., 1]
+    floor = floor_mm < 0.0
     bar = np.zeros(floor.shape, bool)
+    bar_mm = None
     b = setup.bar
     if b.enabled:
         axis = np.asarray(b.direction, float)
@@ -56,7 +69,28 @@ def known_solids(plane: Plane, setup: Setup, bar_margin_mm: float = 0.0) -> Soli
         radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
         m = float(bar_margin_mm)
         bar = (along <= m) & (along >= -b.length_mm - m) & (radial <= b.radius_mm + m)
-    return Solids(floor, bar & ~floor)
+        bar_mm = bar_distance_mm(pts, b, edge_radius_mm=0.0) - m
+    return Solids(floor, bar & ~floor, (floor_mm / px).astype(np.float32),
+                  None if bar_mm is None else (bar_mm / px).astype(np.float32))
+
+
+def bar_distance_mm(points_mm: np.ndarray, bar, edge_radius_mm: float | None = None) -> np.ndarray:
+    """Signed distance (mm, negative inside) of ``points_mm`` ``(..., 3)`` to the resting bar
+    (:class:`~hifumotion.observed.setup.BarSetup`): a cylinder of ``radius_mm`` and
+    ``length_mm`` back from its tip along ``direction``, both ends' rims rounded by
+    ``edge_radius_mm`` (default the bar's own; 0 for sharp) — a rounded rectangle in (along the
+    axis, from the axis), exactly."""
+    axis = np.asarray(bar.direction, float)
+    axis = axis / np.linalg.norm(axis)
+    d = np.asarray(points_mm, float) - np.asarray(bar.tip_at_rest_mm, float)
+    along = d @ axis
+    radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
+    e = float(bar.edge_radius_mm if edge_radius_mm is None else edge_radius_mm)
+    half = 0.5 * float(bar.length_mm)
+    # the rounded rectangle's SDF: centred on the axis half a length back from the tip
+    qa = np.abs(along + half) - (half - e)
+    qr = radial - (float(bar.radius_mm) - e)
+    return np.hypot(np.maximum(qa, 0.0), np.maximum(qr, 0.0)) + np.minimum(np.maximum(qa, qr), 0.0) - e
 
 
 def check_bar_in_image(frame: np.ndarray, solids: Solids, where) -> None:

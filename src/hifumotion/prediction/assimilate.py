@@ -55,12 +55,18 @@ class AssimilationSettings:
         The push scale's random walk (per √s): how fast the filter lets the force move.
     initial_scale_std
         The calibrated push's relative standard deviation at the start.
+    anchor_to_tracking
+        Aim at the tracked section of frame t moved by the model's motion from t to t + k,
+        rather than at the model's own section at t + k: where the tracking sees the section
+        better than the model reproduces it (the model's error is an offset it carries), the
+        present is read from the image and only the motion ahead from the physics.
     """
 
     observation_noise_mm: float = 0.05
     model_noise_mm: float = 0.002
     scale_walk_per_sqrt_s: float = 0.5
     initial_scale_std: float = 0.1
+    anchor_to_tracking: bool = False
 
     def __post_init__(self):
         for name in ("observation_noise_mm", "model_noise_mm", "scale_walk_per_sqrt_s", "initial_scale_std"):

@@ -236,7 +236,9 @@ class OnlineSession:
         h = points_observation(self.model, spec.points_mm, axes, spec.spacing_mm)
         self.filter = OnlineAssimilator(self.model, scene_material(scene), scene.bar.schedule(), h, self.dt, settings)
         solids = known_solids(plane, setup)
-        self.tracker = SpeckleTracker(frame0, self.pixel_mm, exclude=solids.floor, rigid=solids.bar)
+        self.tracker = SpeckleTracker(frame0, self.pixel_mm, exclude=solids.floor, rigid=solids.bar,
+                                      exclude_distance_px=solids.floor_distance_px,
+                                      rigid_distance_px=solids.bar_distance_px)
         self.shape = frame0.shape
         self.points_px = plane.to_pixels(spec.points_mm)            # the model's points A on frame 0
         self.a0 = spec.points_mm @ axes.T - np.asarray(plane.origin_mm, float) @ axes.T   # the same, image mm
@@ -293,11 +295,23 @@ class OnlineSession:
         est = self.filter.assimilate(y, self.horizons, np.repeat(np.where(seen, q, 1.0), 2))
         predicted = {h: self.base + polygon_centroid(self.a0 + est.predicted_mm[h].reshape(-1, 2))
                      for h in self.horizons}
+
+        def tracked_section():
+            boundary, _ = carry_points(self.boundary_px, field_mm, quality, self.tracker.spacing_mm)
+            mask = Contour(boundary, self.contour0.spacing_mm).to_mask(self.shape)
+            return np.asarray(centroid(mask, self.pixel_mm), float) if mask.any() else np.full(2, np.nan)
+
+        anchored = self.filter.settings.anchor_to_tracking
+        if anchored:
+            # the present from the image, the motion ahead from the model
+            tracked = tracked_section()
+            now = self.base + polygon_centroid(self.a0 + est.analysed_mm.reshape(-1, 2))
+            if np.isfinite(tracked).all():
+                predicted = {h: tracked + p - now for h, p in predicted.items()}
         aimed = time.perf_counter()
-        # the tracked section (for the record and the hold baseline: not on the aim's path)
-        boundary, _ = carry_points(self.boundary_px, field_mm, quality, self.tracker.spacing_mm)
-        mask = Contour(boundary, self.contour0.spacing_mm).to_mask(self.shape)
-        tracked = np.asarray(centroid(mask, self.pixel_mm), float) if mask.any() else np.full(2, np.nan)
+        if not anchored:
+            # the tracked section (for the record and the hold baseline: not on the aim's path)
+            tracked = tracked_section()
         t = len(self.steps) + 1
         step = OnlineStep(t, t * self.dt, predicted, tracked, est.scale, est.scale_std,
                           1000.0 * (tracked_at - started), est.latency_ms, 1000.0 * (aimed - started))

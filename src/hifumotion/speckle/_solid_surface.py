@@ -15,15 +15,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from hifumotion.errors import InputError
+
 
 class SolidSurface:
-    """A solid's frame-0 mask as a signed distance and a unit normal, on the pixel grid.
+    """A solid on frame 0's pixel grid as a signed distance and a unit normal.
 
-    ``distance_px`` is negative inside the solid, positive outside and zero on the mask's pixel
-    edges; ``normal`` points out of the solid (unit, (x, y)).
+    ``distance_px`` is negative inside the solid and positive outside: the one given (the
+    solid's geometry, :attr:`~hifumotion.observed.solids.Solids.bar_distance_px`), else the
+    mask's own, zero on its pixel edges — a surface known to half a pixel, a staircase where
+    the face is tilted. ``normal`` points out of the solid (unit, (x, y)).
     """
 
-    def __init__(self, mask: np.ndarray):
+    def __init__(self, mask: np.ndarray, distance_px: np.ndarray | None = None):
         from scipy import ndimage
 
         mask = np.asarray(mask, bool)
@@ -31,9 +35,16 @@ class SolidSurface:
         self.shape = mask.shape
         #: the mask's bounding box (first row, last row + 1, first column, last column + 1)
         self.box = (int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1)
-        outside = ndimage.distance_transform_edt(~mask) - 0.5
-        inside = ndimage.distance_transform_edt(mask) - 0.5
-        self.distance_px = np.where(mask, -inside, outside).astype(np.float32)
+        if distance_px is not None:
+            distance_px = np.asarray(distance_px, np.float32)
+            if distance_px.shape != mask.shape:
+                raise InputError(f"expected a signed distance of shape {mask.shape}, got {distance_px.shape}",
+                                 "distance_px")
+            self.distance_px = np.ascontiguousarray(distance_px)
+        else:
+            outside = ndimage.distance_transform_edt(~mask) - 0.5
+            inside = ndimage.distance_transform_edt(mask) - 0.5
+            self.distance_px = np.where(mask, -inside, outside).astype(np.float32)
         gy, gx = np.gradient(self.distance_px)
         norm = np.hypot(gx, gy)
         norm[norm == 0] = 1.0

@@ -314,7 +314,8 @@ class SpeckleTracker:
     def __init__(self, frame0: np.ndarray, spacing_mm, *, exclude: np.ndarray | None = None,
                  rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
                  keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane", lk_iterations: int = 1,
-                 lk_window: float = LK_WINDOW, keep_out_of_solids: bool = True):
+                 lk_window: float = LK_WINDOW, keep_out_of_solids: bool = True,
+                 exclude_distance_px: np.ndarray | None = None, rigid_distance_px: np.ndarray | None = None):
         import cv2
 
         from hifumotion.speckle._solid_surface import SolidSurface
@@ -360,8 +361,10 @@ class SpeckleTracker:
                 self.element = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * bloom[1] + 1, 2 * bloom[0] + 1))
         self.rigid_tracker = RigidTracker(frame0, rigid) if rigid is not None else None
         # the solids themselves (not their bloom), which no material can enter
-        self.rigid_surface = SolidSurface(rigid) if keep_out_of_solids and rigid is not None else None
-        self.static_surface = SolidSurface(static) if keep_out_of_solids and static.any() else None
+        self.rigid_surface = (SolidSurface(rigid, rigid_distance_px)
+                              if keep_out_of_solids and rigid is not None else None)
+        self.static_surface = (SolidSurface(static, exclude_distance_px)
+                               if keep_out_of_solids and static.any() else None)
         self.grown_static = _grow(static, self.element) if static.any() else static   # it does not move
         self.gx, self.gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
         self.frames_seen = 1
@@ -481,6 +484,7 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
                  rigid: np.ndarray | None = None, estimator: str = "farneback", smoothing: float = 1.0,
                  keyframe_quality: float = KEYFRAME_QUALITY, fill: str = "plane", lk_iterations: int = 1,
                  lk_window: float = LK_WINDOW, keep_out_of_solids: bool = True,
+                 exclude_distance_px: np.ndarray | None = None, rigid_distance_px: np.ndarray | None = None,
                  progress: bool = False) -> DisplacementSeries:
     """Track the speckle of a cine loop: the displacement of frame 0's material points at every frame.
 
@@ -531,6 +535,10 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         static ones; not their bloom) onto the solid's surface along its normal (default):
         under a pushing bar the fill from the visible tissue lags the push, and no tissue can
         be where the bar is (:mod:`~hifumotion.speckle._solid_surface`). Quality is unchanged.
+    exclude_distance_px, rigid_distance_px
+        The solids' signed distances (px, negative inside) where their geometry is known
+        (:func:`~hifumotion.observed.solids.known_solids`): the surfaces material is kept out
+        of, to a fraction of a pixel; without them, the masks' own (to half a pixel).
     progress
         Show a progress bar.
 
@@ -554,7 +562,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     tracker = SpeckleTracker(frames[0], spacing_mm, exclude=exclude, rigid=rigid, estimator=estimator,
                              smoothing=smoothing, keyframe_quality=keyframe_quality, fill=fill,
                              lk_iterations=lk_iterations, lk_window=lk_window,
-                             keep_out_of_solids=keep_out_of_solids)
+                             keep_out_of_solids=keep_out_of_solids, exclude_distance_px=exclude_distance_px,
+                             rigid_distance_px=rigid_distance_px)
     t_count, h, w = frames.shape
     out = np.zeros((t_count, h, w, 2), np.float32)
     quality = np.zeros((t_count, h, w), np.float32)

@@ -221,7 +221,10 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
     first_s = time.perf_counter() - t0
     if series is None:
         series = track_speckle(frames, spacing_mm, exclude=None if solids is None else solids.floor,
-                               rigid=None if solids is None else solids.bar, progress=progress)
+                               rigid=None if solids is None else solids.bar,
+                               exclude_distance_px=None if solids is None else solids.floor_distance_px,
+                               rigid_distance_px=None if solids is None else solids.bar_distance_px,
+                               progress=progress)
     contours, masks, quality = [], [], []
     # the water's grey level, for the solids in a refined frame (frame 0 away from target and solids)
     background = float(np.median(frames[0][~first.mask & ~first.excluded])) if refine_iterations > 0 else 0.0
