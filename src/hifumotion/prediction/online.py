@@ -10,7 +10,10 @@ frame as it arrives (:meth:`OnlineSession.push`):
 2. **assimilate**: the :class:`~hifumotion.prediction.assimilate.OnlineAssimilator` corrects
    the reduced model's state and the push's scale with the points' tracked displacement;
 3. **aim**: for each horizon k the section at t + k — the frame-0 section moved as the
-   polygon of the points A — and its centroid, the aim.
+   polygon of the points A — and its centroid; anchored (the default,
+   ``AssimilationSettings.anchor_to_tracking``), the aim is the tracked section's centroid at
+   t moved by the model's motion from t to t + k: the present from the image, the motion
+   ahead from the physics.
 
 Each frame's wall time, from the frame in memory to its aims, is its latency (tracking
 included). :func:`online_loop` replays a recorded cine through a session; ``hifumotion

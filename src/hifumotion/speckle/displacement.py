@@ -318,9 +318,8 @@ class SpeckleTracker:
                  exclude_distance_px: np.ndarray | None = None, rigid_distance_px: np.ndarray | None = None):
         import cv2
 
-        from hifumotion.speckle._solid_surface import SolidSurface
-
         from hifumotion.observed.solids import measure_bloom_px
+        from hifumotion.speckle._solid_surface import SolidSurface
         from hifumotion.speckle._speckle_size import speckle_fwhm_px
 
         frame0 = unit_frames(np.asarray(frame0)[None])[0]
@@ -532,7 +531,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         15–25 % less accurate on the twins: docs/decisions.md).
     keep_out_of_solids
         Move material the field puts inside a solid (the bar where it is in that frame, the
-        static ones; not their bloom) onto the solid's surface along its normal (default):
+        static ones; not their bloom) onto its surface — the bar's along the bar's motion, a
+        static one's along its normal (default):
         under a pushing bar the fill from the visible tissue lags the push, and no tissue can
         be where the bar is (:mod:`~hifumotion.speckle._solid_surface`). Quality is unchanged.
     exclude_distance_px, rigid_distance_px
