@@ -20,7 +20,9 @@ time / reduced: the real-time factor), the error ratio and the targets as true/f
 a summary at the end. ``--quick`` runs one twin at 1,000 particles (a few minutes).
 
 ``--online`` measures the second part on the ``push_change`` twins (the push raised,
-lowered or lifted after the training frames, unannounced): the online filter
+lowered or lifted after the training frames, unannounced) and on the large-motion slides
+(``LARGE_MOTION_CASES``: a stage drives the bar, the sample slides millimetres and stops; the
+filter reads the drive's size): the online filter
 (:mod:`hifumotion.prediction.assimilate`) on the reduced model, fed the speckle-tracked
 displacement of the points A frame by frame from frame 1, predicting 300 ms ahead; from
 the end of the training frames on, the error of the predicted section's centroid shift
@@ -90,7 +92,9 @@ def _twin_models(twin: Path, particles: int):
     p = json.loads((twin / "truth" / "parameters.json").read_text())
     # a driven bar (travel control) pushed no force: its runs do not read one, the nominal stands in
     force = p["external_force_n"] if p["external_force_n"] is not None else Parameters().force_n
-    k = Parameters(force, p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"])
+    # the twin's own floor and bar friction too (a slide's motion is set by it)
+    k = Parameters(force, p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"],
+                   friction=p.get("friction"))
     set_threads(1)   # one core, as the targets and the calibration's workers
     implicit = model_spec(obs, ModelSettings(tissue_particles=particles))
     implicit.voxels()   # made once, shared by the reduced spec
@@ -193,7 +197,7 @@ def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
             "latency_with_tracking_ms": {"median": round(float(np.median(total)), 2),
                                          "p99": round(float(np.percentile(total, 99)), 2)},
             "scale_at_end": round(float(result.scale[-1]), 3),
-            "true_change_factor": _twin_settings(twin)["protocol"].get("change_factor"),
+            "true_change_factor": _twin_settings(twin)["protocol"].get("change_factor") if change_s is not None else None,
             "targets": {"centroid_0.1mm": mean["filter"] <= 0.1,
                         "half_of_hold_kalman_offline": all(mean["filter"] <= 0.5 * mean[b]
                                                            for b in ("hold", "kalman", "offline")),
@@ -231,7 +235,7 @@ def reference_sensitivity(twin: Path, particles: int, scales=(1.0, 2.0)) -> dict
 
 
 def main() -> None:
-    from _estimation_twins import CASES, twin_folder
+    from _estimation_twins import CASES, LARGE_MOTION_CASES, twin_folder
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="one twin at 1,000 particles")
@@ -239,7 +243,8 @@ def main() -> None:
     ap.add_argument("--twin", type=Path, default=None, help="an existing twin folder instead of the cases")
     ap.add_argument("--particles", type=int, default=None, help="tissue particles (default 4,399; --quick 1,000)")
     ap.add_argument("--work", type=Path, default=ROOT / ".bench" / "twins")
-    ap.add_argument("--online", action="store_true", help="the online loop on the push_change twins instead")
+    ap.add_argument("--online", action="store_true",
+                    help="the online loop on the push_change twins and the large-motion slides instead")
     ap.add_argument("--reference-sensitivity", action="store_true",
                     help="instead: how much the implicit path's own motion changes at half its step tolerance "
                          "and twice its stick reach (F/E × 1 and × 2)")
@@ -254,7 +259,8 @@ def main() -> None:
             print(json.dumps(reference_sensitivity(t, particles)), flush=True)
         return
     if args.online:
-        names = args.cases.split(",") if args.cases else [c for c in CASES if c.startswith("push_change")]
+        names = (args.cases.split(",") if args.cases else
+                 [c for c in CASES if c.startswith("push_change")] + list(LARGE_MOTION_CASES))
         if args.quick and not args.cases:
             names = names[:1]
         particles = args.particles or (1000 if args.quick else 4399)

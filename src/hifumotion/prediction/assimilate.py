@@ -7,7 +7,9 @@ Kalman filter (the reduced-order filter of Moireau & Chapelle, ESAIM: COCV 2011,
 Optimus runs it) corrects its state with each frame's tracked displacement:
 
 * **State** ``x = [q; a]``: the reduced coordinates and the push's scale a — the force is
-  ``a F(t)``, F the calibrated schedule (the announced shape at the fitted magnitude). The
+  ``a F(t)``, F the calibrated schedule (the announced shape at the fitted magnitude); for a
+  bar in travel control (driven by a stage) the drive is ``a s(t)``, s the programmed travel,
+  and the force it takes is a result. The
   scale is the one parameter a push that changes unannounced makes unknown again (E, ν,
   β1, β2 stay the calibration's); it follows a random walk of ``scale_walk_per_sqrt_s``
   per √s, so after a change the filter lets the data move it.
@@ -16,7 +18,8 @@ Optimus runs it) corrects its state with each frame's tracked displacement:
   Jacobian is the step's own linearisation
   (:meth:`~hifumotion.creep.reduced.ReducedCreep.solve_response`): the step's matrix A
   (its friction's tangent included) inverted on the subspace its pressed contacts leave
-  free, on ``∂rhs/∂q = C_r/Δt + M_r/Δt²`` and ``∂rhs/∂a = F(t₊) v_s``.
+  free, on ``∂rhs/∂q = C_r/Δt + M_r/Δt²`` and ``∂rhs/∂a = F(t₊) v_s`` (a driven bar:
+  ``k s(t₊) v_s``, k the penalty that holds its advance, :func:`~hifumotion.creep.reduced.driven_bar`).
 * **Analysis.** The observation is the in-plane displacement since frame 0 (mm) of
   material points (the contour points A that speckle tracking carries), linear in q:
   ``y = H (q − q₀)``; its noise ``observation_noise_mm`` per coordinate.
@@ -35,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hifumotion.creep.integrate import CreepMaterial
-from hifumotion.creep.reduced import ReducedCreep, ReducedState, step_counters
+from hifumotion.creep.reduced import ReducedCreep, ReducedState, driven_bar, step_counters
 from hifumotion.errors import InputError
 
 MM = 1e-3
@@ -109,10 +112,13 @@ class OnlineAssimilator:
         reduced coordinate (:func:`points_observation`).
     frame_interval_s
         Time between frames (s).
+    travel_m
+        A bar in travel control: its programmed travel ``s(t)`` (m at t s, from where it rests on
+        the settled tissue), which the scale multiplies; ``force_n`` is then not read.
     """
 
     def __init__(self, model: ReducedCreep, material: CreepMaterial, force_n, observation: np.ndarray,
-                 frame_interval_s: float, settings: AssimilationSettings | None = None):
+                 frame_interval_s: float, settings: AssimilationSettings | None = None, travel_m=None):
         if not (np.isfinite(frame_interval_s) and frame_interval_s > 0):
             raise InputError(f"must be a finite number of seconds > 0, got {frame_interval_s}", "frame_interval_s")
         self.model = model
@@ -124,8 +130,12 @@ class OnlineAssimilator:
             raise InputError(f"expected an (m, {r}) observation matrix, got {self.h.shape}", "observation")
         self.dt = float(frame_interval_s)
         self.schedule = force_n
-        self.state = model.settle(self.loads, float(force_n(0.0)))
+        self.travel = travel_m
+        self.state = model.settle(self.loads, 0.0 if travel_m is not None else float(force_n(0.0)))
         self.q0 = self.state.q.copy()
+        # a driven bar's travel counts from its place on the settled tissue (as the model's runs)
+        self.rest_m = float(model.basis.advance_modes_m @ self.q0)
+        self.force_n = 0.0
         self.scale = 1.0
         self.cov = np.zeros((r + 1, r + 1))
         self.cov[r, r] = s.initial_scale_std ** 2
@@ -133,8 +143,14 @@ class OnlineAssimilator:
         self.stats = step_counters(model)
 
     def _forecast(self, state: ReducedState, scale: float, dt: float) -> ReducedState:
-        force = scale * float(self.schedule(state.t_s + dt))
-        new, _ = self.model.step(state, self.loads, dt, force, self.stats, error=False)
+        if self.travel is None:
+            force = scale * float(self.schedule(state.t_s + dt))
+            new, _ = self.model.step(state, self.loads, dt, force, self.stats, error=False)
+            self.force_n = force
+        else:
+            advance = self.rest_m + scale * float(self.travel(state.t_s + dt))
+            new, _ = self.model.step(state, self.loads, dt, 0.0, self.stats, error=False, advance_m=advance)
+            self.force_n = float(self.stats["bar_force_n"])
         return new
 
     def assimilate(self, observed_mm: np.ndarray, horizons_frames=(), quality: np.ndarray | None = None
@@ -152,10 +168,17 @@ class OnlineAssimilator:
         r = self.model.basis.size
         dt = self.dt
         nominal = self._forecast(self.state, self.scale, dt)
+        taken = self.force_n        # a driven bar's force: what the forecast's step took
         # the forecast's Jacobian, the step's own linearisation: its last round's matrix (friction
         # included) on the subspace its pressed contacts leave free, applied to what q and a
-        # bring to its right-hand side (M/Δt² + C/Δt per unit q; F(t₊) v_s per unit a)
-        push = float(self.schedule(self.state.t_s + dt)) * self.model.basis.advance_modes_m
+        # bring to its right-hand side (M/Δt² + C/Δt per unit q; F(t₊) v_s per unit a, a driven
+        # bar's k s(t₊) v_s)
+        v_s = self.model.basis.advance_modes_m
+        if self.travel is None:
+            push = float(self.schedule(self.state.t_s + dt)) * v_s
+        else:
+            step_matrix = self.loads.stiffness + self.state.viscous / dt + self.model.mass / dt ** 2
+            push = driven_bar(step_matrix, v_s) * float(self.travel(self.state.t_s + dt)) * v_s
         response = self.model.solve_response(
             np.column_stack([self.state.viscous / dt + self.model.mass / dt ** 2, push]))
         jac = np.zeros((r + 1, r + 1))
@@ -188,7 +211,7 @@ class OnlineAssimilator:
         for k in horizons_frames:
             ahead = self._forecast(self.state, self.scale, int(k) * dt)
             predicted[int(k)] = self.h @ (ahead.q - self.q0) / MM
-        force = self.scale * float(self.schedule(self.state.t_s))
+        force = self.scale * float(self.schedule(self.state.t_s)) if self.travel is None else taken
         return FrameEstimate(self.frame, self.scale, force, float(np.sqrt(self.cov[r, r])), y,
                              self.h @ (self.state.q - self.q0) / MM, predicted,
                              1000.0 * (time.perf_counter() - started))

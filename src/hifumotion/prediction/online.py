@@ -46,7 +46,8 @@ class OnlineResult:
     tracked_mm
         ``(T, 2)`` the tracked section's centroid at every frame (NaN where the mask is empty).
     scale, scale_std
-        The push's estimated scale (force over the calibrated schedule) after each frame.
+        The push's estimated scale (force over the calibrated schedule; a driven bar's travel over its
+        program) after each frame.
     latency_ms
         Each frame's wall time from the frame in memory to its aims (tracking, assimilation
         and every horizon's prediction).
@@ -226,10 +227,6 @@ class OnlineSession:
         self.dt = float(spec.frame_interval_s)
         self.pixel_mm = float(setup.pixel_mm)
         last = max(int(frames_expected or setup.frames) - 1, max(self.horizons) + 1)
-        if spec.scene.bar.enabled and spec.scene.bar.control == "travel":
-            # the filter corrects the size of a push; a driven bar's travel is known, its force a result
-            raise InputError("the online loop assimilates a pushed bar's force; a bar in travel control "
-                             "(setup.json push.control = travel) is not supported yet", "push.control")
         t0 = time.perf_counter()
         self.model = spec.reduced(k, last, progress=lambda f: tell("reduced model", f))
         self.construction_s = time.perf_counter() - t0
@@ -237,7 +234,14 @@ class OnlineSession:
         plane = imaging_plane(setup)
         axes = np.stack([np.asarray(plane.u, float), np.asarray(plane.v, float)])
         h = points_observation(self.model, spec.points_mm, axes, spec.spacing_mm)
-        self.filter = OnlineAssimilator(self.model, scene_material(scene), scene.bar.schedule(), h, self.dt, settings)
+        if scene.bar.enabled and scene.bar.control == "travel":
+            # a driven bar: the scale multiplies its programmed travel, and its force is a result
+            travel_mm = scene.bar.travel_schedule()
+            self.filter = OnlineAssimilator(self.model, scene_material(scene), lambda t: 0.0, h, self.dt, settings,
+                                            travel_m=lambda t: float(travel_mm(t)) * 1e-3)
+        else:
+            self.filter = OnlineAssimilator(self.model, scene_material(scene), scene.bar.schedule(), h, self.dt,
+                                            settings)
         solids = known_solids(plane, setup)
         self.tracker = SpeckleTracker(frame0, self.pixel_mm, exclude=solids.floor, rigid=solids.bar,
                                       exclude_distance_px=solids.floor_distance_px,
