@@ -616,3 +616,64 @@ def test_the_bars_rim_is_rounded_at_its_own_edge_or_half_a_spacing_whichever_is_
     solver = CreepSolver(mesh, CreepMaterial(1e4, 0.3), Surroundings((0.0, 0.0, 0.0)),
                          [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch)
     assert solver.punch.edge_radius_m == pytest.approx(expected_mm * MM)
+
+
+def test_nodes_that_stay_on_the_floor_and_the_bars_face_in_every_snapshot_are_held_there_by_the_modes():
+    """The tilted bar drives the stiff block (the wedge above) in two full runs: in the reduced
+    model's basis the bottom nodes' floor-normal motion is exactly zero and the face nodes'
+    axial motion exactly the bar's advance (the full model's pressed contacts), the modes stay
+    orthonormal and hold the snapshots as before, and the reduced block driven 3× the
+    shorter snapshot's travel slides at the closed form's dx = dδ / sin θ."""
+    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, held_on_solids, pod_basis
+
+    n, rho, g, e = 4, 1000.0, 9.81, 1e6
+    theta = math.radians(35.0)
+    side = n * MM
+    axis = np.array([math.sin(theta), -math.cos(theta), 0.0])
+    along_face = np.array([math.cos(theta), math.sin(theta), 0.0])
+    radius = 8 * MM
+    tip = np.array([0.0, side, side / 2]) - 0.5 * radius * along_face - 0.05 * MM * axis
+    mesh = voxel_mesh(block(n), 1.0)
+    material = CreepMaterial(e, 0.3, beta1=0.0, density_kg_m3=rho)
+
+    def solver(travel_m):
+        punch = Punch(tuple(tip), tuple(axis), radius, lambda t: 0.0, 0.1, (), travel_m=lambda t: travel_m * t)
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.2)], punch,
+                           CreepSettings(tolerance=1e-4))
+
+    times = np.linspace(0.0, 1.0, 11)
+    bottom = mesh.nodes_mm[:, 1] < 1e-9
+    rng = np.random.default_rng(4)
+    runs = []
+    for travel in (0.5, 2.0):
+        run = solver(travel * MM).run(times)
+        # what a bigger mesh's snapshots carry on the floor: contacts that open and close, noise
+        # of a micrometre in the floor's normal (far below its 1 % tolerance)
+        nodes = run.nodes_mm.copy()
+        nodes[1:, bottom, 1] += rng.uniform(0.0, 1e-3, (len(times) - 1, int(bottom.sum())))
+        runs.append(dataclasses.replace(run, nodes_mm=nodes))
+    basis = pod_basis(runs)
+    full = solver(1.5 * MM)
+    held = held_on_solids(basis, full, 1e-2 * full.dx_m)
+    v = held.node_modes_m.reshape(len(mesh.nodes_mm), 3, -1)
+    assert np.abs(basis.node_modes_m.reshape(v.shape)[bottom, 1]).max() > 1e-4   # the noise is in the modes
+    assert np.abs(v[bottom, 1]).max() == 0.0                                     # and held out of them
+    stacked = np.vstack([held.node_modes_m, held.advance_modes_m[None]])
+    np.testing.assert_allclose(stacked.T @ stacked, np.eye(held.size), atol=1e-12)
+    # the face's nodes: those the runs kept on it move along the axis exactly with the bar
+    rel = basis.settled_nodes_mm * MM - (np.asarray(tip) + basis.advance_at_rest_mm * MM * axis)
+    on_face = np.abs(rel @ axis) <= 1e-2 * full.dx_m
+    if on_face.any():
+        gap_modes = np.einsum("k,nkr->nr", axis, v[on_face]) - held.advance_modes_m[None]
+        assert np.abs(gap_modes).max() < 1e-12
+    # the snapshots are held as well as before: every frame's motion, projected on either basis
+    for run in runs:
+        x = np.hstack([(run.nodes_mm - run.nodes_mm[:1]).reshape(len(times), -1) * MM,
+                       (run.advance_mm - run.advance_mm[0])[:, None] * MM]).T
+        old = np.vstack([basis.node_modes_m, basis.advance_modes_m[None]])
+        assert np.linalg.norm(x - stacked @ (stacked.T @ x)) <= np.linalg.norm(x - old @ (old.T @ x)) + 1e-3 * np.linalg.norm(x)
+    reduced = ReducedCreep(full, basis, ReducedSettings(tolerance=1e-4))
+    r = reduced.run(material, lambda t: 0.0, (), times, travel_m=lambda t: 1.5 * MM * t)
+    x_mm = (r.nodes_mm[:, :, 0] - r.nodes_mm[:1, :, 0]).mean(1)
+    rate = np.polyfit(r.advance_mm[3:], x_mm[3:], 1)[0]
+    assert rate == pytest.approx(1.0 / math.sin(theta), rel=2e-3)

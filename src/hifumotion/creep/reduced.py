@@ -40,7 +40,7 @@ full step at r ≈ 20 (docs/decisions.md).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -77,6 +77,8 @@ class ReducedBasis:
     training_rates
         ``(J, r)`` the snapshots' reduced velocities (1/s), frame to frame: what the
         viscosity's hyper-reduction (:mod:`.hyper`) is fitted on.
+    snapshot_coordinates
+        ``(r, S)`` every snapshot frame's reduced coordinates (m): where the runs went.
     """
 
     node_modes_m: np.ndarray
@@ -86,6 +88,7 @@ class ReducedBasis:
     singular_values: np.ndarray
     max_motion_mm: float
     training_rates: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    snapshot_coordinates: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def size(self) -> int:
@@ -121,7 +124,67 @@ def pod_basis(runs: Sequence[CreepResult], energy: float = 1.0 - 1e-8, max_modes
     return ReducedBasis(np.ascontiguousarray(left[:-1, :r]), left[-1, :r].copy(), runs[0].nodes_mm[0].copy(),
                         float(runs[0].stats.get("advance_at_rest_mm", 0.0)), sigma,
                         float(np.sqrt((x[:-1].reshape(-1, 3, x.shape[1]) ** 2).sum(axis=1)).max()) / MM,
-                        np.vstack(rates))
+                        np.vstack(rates), left[:, :r].T @ x)
+
+
+def held_on_solids(basis: ReducedBasis, solver, tolerance_m: float) -> ReducedBasis:
+    """``basis`` with the nodes that lie on a plane or the bar's face at rest and stayed on it in
+    every snapshot (their gap within ``tolerance_m`` throughout) held on it exactly: their
+    modes' normal part set to zero on a plane, to the bar's advance on its face; then the modes
+    made orthonormal again (column operations keep what the rows were set to, as both are
+    linear in the columns).
+
+    In the full model such a node's normal is eliminated while it presses, so the snapshots
+    keep it on the plane up to their last digits and the onsets of other contacts; the modes
+    then carry a normal part of 10⁻⁴–10⁻³ there, and each such node's contact row, touching at
+    rest, is a constraint the contact solve can press: as many of them as there are modes lock
+    the model (slide_stop_s49: 7 rows pressed on 7 modes stopped a slide at 3.7 of 10 mm,
+    docs/decisions.md). Held, they slide along the plane and cannot leave it — the full model's
+    pressed contact — and their rows vanish. ``tolerance_m`` 0 (or a basis without its snapshot
+    coordinates) changes nothing."""
+    snapshots = basis.snapshot_coordinates
+    if tolerance_m <= 0 or snapshots.size == 0:
+        return basis
+    settled = basis.settled_nodes_mm * MM
+    n = len(settled)
+    v = basis.node_modes_m.reshape(n, 3, -1).copy()
+    held = 0
+    for k, plane in enumerate(solver.contacts.planes):
+        if plane.bonded:
+            continue
+        normal = solver.contacts.body_frames[k, 0]
+        gap = (settled - np.asarray(plane.point_m)) @ normal
+        near = np.flatnonzero(np.abs(gap) <= tolerance_m)
+        if len(near) == 0:
+            continue
+        normal_modes = np.einsum("k,nkr->nr", normal, v[near])           # (near, r)
+        still = np.abs(normal_modes @ snapshots).max(axis=1) < tolerance_m
+        nodes = near[still]
+        v[nodes] -= normal[None, :, None] * normal_modes[still][:, None, :]
+        held += len(nodes)
+    punch = solver.contacts.punch
+    if punch is not None:
+        # the bar's face: a node on it at rest whose gap to it (its motion along the axis less
+        # the bar's advance) stayed within the tolerance moves with the bar along its axis —
+        # the full model's face contact, whose node takes the bar's advance along its normal
+        a = solver.contacts.body_frames[solver.contacts.punch_index, 0]
+        rel = settled - (np.asarray(punch.tip_m) + basis.advance_at_rest_mm * MM * a)
+        along = rel @ a
+        across = np.linalg.norm(rel - along[:, None] * a, axis=1)
+        near = np.flatnonzero((np.abs(along) <= tolerance_m) & (across <= punch.radius_m))
+        if len(near):
+            gap_modes = np.einsum("k,nkr->nr", a, v[near]) - basis.advance_modes_m[None]
+            still = np.abs(gap_modes @ snapshots).max(axis=1) < tolerance_m
+            nodes = near[still]
+            v[nodes] -= a[None, :, None] * gap_modes[still][:, None, :]
+            held += len(nodes)
+    if held == 0:
+        return basis
+    old_full = np.vstack([basis.node_modes_m, basis.advance_modes_m[None]])
+    q, _ = np.linalg.qr(np.vstack([v.reshape(3 * n, -1), basis.advance_modes_m[None]]))
+    change = q.T @ old_full                    # old coordinates → new ones
+    return replace(basis, node_modes_m=np.ascontiguousarray(q[:-1]), advance_modes_m=q[-1].copy(),
+                   training_rates=basis.training_rates @ change.T, snapshot_coordinates=change @ snapshots)
 
 
 class ReducedCreep:
@@ -133,8 +196,8 @@ class ReducedCreep:
     """
 
     def __init__(self, solver, basis: ReducedBasis, settings: ReducedSettings | None = None):
-        self.basis = basis
         self.settings = settings or ReducedSettings()
+        basis = self.basis = held_on_solids(basis, solver, self.settings.kept_on_solid * solver.dx_m)
         self.mesh = solver.mesh
         self.matrices = solver.matrices
         self.dx_m = solver.dx_m

@@ -90,6 +90,10 @@ class ReducedSettings:
         largest node motion plus this many spacings.
     contact_tolerance
         A candidate is in contact when its gap is below this many spacings.
+    kept_on_solid
+        A node on a plane or the bar's face at rest whose gap stayed within this many spacings
+        in every snapshot is held there by the modes (:func:`~.reduced.held_on_solids`; 1 %,
+        the penetration the twins' physicality check allows); 0 holds none.
     friction
         Coulomb's friction on the candidates (:mod:`.reduced_friction`); False leaves sliding
         free (the reduced model before it, kept to measure what friction buys).
@@ -109,6 +113,7 @@ class ReducedSettings:
     max_modes: Annotated[int, Ge(1), Le(1000)] = 40
     contact_reach: Annotated[float, Ge(0)] = 1.0
     contact_tolerance: Annotated[float, Ge(0)] = 1e-4
+    kept_on_solid: Annotated[float, Ge(0)] = 1e-2
     friction: bool = True
     friction_touch: Positive = 1e-2
     friction_rounds: Count = 4
