@@ -201,3 +201,18 @@ def test_a_closed_pipe_is_not_an_error():
     err = proc.stderr.read().decode()
     proc.wait(timeout=60)
     assert "Traceback" not in err and "error" not in err.lower(), err
+
+
+def test_the_runs_verdict_line_shows_both_margins_it_may_rest_on():
+    """A verdict earned on the centroid (DSC margin within its spread) is printed with the
+    centroid margin beside the DSC one, so the line does not claim a win on 0.0003 DSC alone."""
+    from hifumotion.cli.workflow import _verdict
+
+    summary = {"physics_vs_no_motion": "better", "dsc_margin_over_no_motion": 0.0003, "dsc_margin_spread": 0.0027,
+               "centroid_margin_over_no_motion_mm": 0.051, "centroid_margin_spread_mm": 0.02}
+    line = _verdict(summary)
+    assert line.startswith("better than holding still") and "+0.0003 ± 0.0027" in line
+    assert "centroid +0.051 ± 0.020 mm" in line
+    # a run_info.json written before has no centroid margin: the DSC one alone
+    old = {k: v for k, v in summary.items() if not k.startswith("centroid")}
+    assert "centroid" not in _verdict(old)

@@ -109,5 +109,10 @@ def _verdict(summary: dict) -> str:
     if verdict is None:
         return "not compared with holding still (too few validation frames)"
     words = {"better": "better than", "worse": "worse than", "no better": "no better than"}[verdict]
+    # both margins: the verdict may rest on either (evaluate.margin_over)
+    centroid = ""
+    if summary.get("centroid_margin_over_no_motion_mm") is not None:
+        centroid = (f", centroid {summary['centroid_margin_over_no_motion_mm']:+.3f} ± "
+                    f"{summary['centroid_margin_spread_mm']:.3f} mm")
     return (f"{words} holding still (DSC {summary['dsc_margin_over_no_motion']:+.4f} ± "
-            f"{summary['dsc_margin_spread']:.4f} a frame)")
+            f"{summary['dsc_margin_spread']:.4f}{centroid} a frame)")

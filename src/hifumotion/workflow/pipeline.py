@@ -210,6 +210,8 @@ def outcome_summary(o: PipelineOutcome) -> dict:
            "physics_vs_no_motion": margin.get("verdict"),
            "dsc_margin_over_no_motion": margin.get("dsc_margin_mean"),
            "dsc_margin_spread": margin.get("dsc_margin_std"),
+           "centroid_margin_over_no_motion_mm": margin.get("centroid_margin_mean_mm"),
+           "centroid_margin_spread_mm": margin.get("centroid_margin_std_mm"),
            "online_loop_latency_with_tracking_ms_median": (o.online_loop.summary()["latency_with_tracking_ms"]["median"]
                                                            if o.online_loop is not None else None),
            "online_loop_push_scale_last": float(o.online_loop.scale[-1]) if o.online_loop is not None else None,
