@@ -63,8 +63,8 @@ class AssimilationSettings:
         rather than at the model's own section at t + k: where the tracking sees the section
         better than the model reproduces it (the model's error is an offset it carries), the
         present is read from the image and only the motion ahead from the physics. On by
-        default (docs/decisions.md, "Tissue cannot enter the bar": on both push_change twins
-        the anchored aim is the better one, 300 ms ahead).
+        default (docs/decisions.md, "The online aim": on both push_change twins the anchored
+        aim is the better one, 300 ms ahead).
     """
 
     observation_noise_mm: float = 0.05
