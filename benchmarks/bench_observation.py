@@ -275,6 +275,7 @@ def run_twin(folder: Path, estimators: list[str]) -> dict:
     from hifumotion.experiment.motion_truth import read_true_motion
     from hifumotion.observed import load_observed
     from hifumotion.speckle import displacement, follow, speckle_fwhm_px
+    from hifumotion.speckle.follow import tracker_solids
 
     truth = read_true_motion(folder)
     obs = load_observed(folder / "observed")
@@ -296,13 +297,11 @@ def run_twin(folder: Path, estimators: list[str]) -> dict:
               "displacement": {}, "contours": {}}
     cv2.setNumThreads(1)
     for name in estimators:
-        series = displacement(frames, px, exclude=solids.floor, rigid=solids.bar, estimator=name,
-                              exclude_distance_px=solids.floor_distance_px, rigid_distance_px=solids.bar_distance_px)
+        series = displacement(frames, px, estimator=name, **tracker_solids(solids))
         result["displacement"][name] = displacement_errors(series, truth, visible)
         if name == estimators[0]:
             result["displacement_by_strain"] = displacement_by_strain(series, truth)
-    series = displacement(frames, px, exclude=solids.floor, rigid=solids.bar, fill="mean",
-                          exclude_distance_px=solids.floor_distance_px, rigid_distance_px=solids.bar_distance_px)
+    series = displacement(frames, px, fill="mean", **tracker_solids(solids))
     result["displacement"][f"{estimators[0]}, fill=mean"] = displacement_errors(series, truth, visible)
     # the floor of any tracker of these images: the true frame-0 contour carried by the true in-plane
     # displacement (what the speckle shows) against the true section (which out-of-plane motion changes too)

@@ -70,6 +70,7 @@ def track(
     from hifumotion.speckle import follow
     from hifumotion.speckle._flow import ESTIMATORS
     from hifumotion.speckle.displacement import displacement
+    from hifumotion.speckle.follow import tracker_solids
     from hifumotion.speckle.output import write_tracking
 
     if method.lower() not in METHODS:
@@ -109,11 +110,8 @@ def track(
                                         "spacing_mm": list(seq.spacing_mm), "frame_interval_s": seq.frame_interval_s})
     with output_folder(output, overwrite, inputs=(source, init, setup, exclude, bar)) as out:
         with record.stage("speckle tracking"):
-            series = displacement(seq.frames, seq.spacing_mm, exclude=None if solids is None else solids.floor,
-                                  rigid=None if solids is None else solids.bar,
-                                  exclude_distance_px=None if solids is None else solids.floor_distance_px,
-                                  rigid_distance_px=None if solids is None else solids.bar_distance_px,
-                                  estimator=estimator, progress=True)
+            series = displacement(seq.frames, seq.spacing_mm, estimator=estimator, progress=True,
+                                  **tracker_solids(solids))
         with record.stage("contours"):
             result = follow(seq.frames, start, seq.spacing_mm, solids=solids, boundary_offset_mm=boundary_offset,
                             method=method, series=series)

@@ -149,35 +149,32 @@ def held_on_solids(basis: ReducedBasis, solver, tolerance_m: float) -> ReducedBa
     n = len(settled)
     v = basis.node_modes_m.reshape(n, 3, -1).copy()
     held = 0
+
+    def hold(near: np.ndarray, direction: np.ndarray, moves_with: np.ndarray) -> int:
+        """Hold the nodes ``near`` whose gap (their motion along ``direction`` less ``moves_with``
+        per unit q) stayed within the tolerance in every snapshot: that gap set to zero."""
+        gap_modes = np.einsum("k,nkr->nr", direction, v[near]) - moves_with[None]
+        still = np.abs(gap_modes @ snapshots).max(axis=1) < tolerance_m
+        v[near[still]] -= direction[None, :, None] * gap_modes[still][:, None, :]
+        return int(still.sum())
+
     for k, plane in enumerate(solver.contacts.planes):
         if plane.bonded:
             continue
         normal = solver.contacts.body_frames[k, 0]
         gap = (settled - np.asarray(plane.point_m)) @ normal
-        near = np.flatnonzero(np.abs(gap) <= tolerance_m)
-        if len(near) == 0:
-            continue
-        normal_modes = np.einsum("k,nkr->nr", normal, v[near])           # (near, r)
-        still = np.abs(normal_modes @ snapshots).max(axis=1) < tolerance_m
-        nodes = near[still]
-        v[nodes] -= normal[None, :, None] * normal_modes[still][:, None, :]
-        held += len(nodes)
+        held += hold(np.flatnonzero(np.abs(gap) <= tolerance_m), normal, np.zeros(v.shape[2]))
     punch = solver.contacts.punch
     if punch is not None:
-        # the bar's face: a node on it at rest whose gap to it (its motion along the axis less
-        # the bar's advance) stayed within the tolerance moves with the bar along its axis —
-        # the full model's face contact, whose node takes the bar's advance along its normal
+        # the bar's face: a node on it at rest whose gap to it stayed within the tolerance moves
+        # with the bar along its axis — the full model's face contact, whose node takes the
+        # bar's advance along its normal
         a = solver.contacts.body_frames[solver.contacts.punch_index, 0]
         rel = settled - (np.asarray(punch.tip_m) + basis.advance_at_rest_mm * MM * a)
         along = rel @ a
         across = np.linalg.norm(rel - along[:, None] * a, axis=1)
-        near = np.flatnonzero((np.abs(along) <= tolerance_m) & (across <= punch.radius_m))
-        if len(near):
-            gap_modes = np.einsum("k,nkr->nr", a, v[near]) - basis.advance_modes_m[None]
-            still = np.abs(gap_modes @ snapshots).max(axis=1) < tolerance_m
-            nodes = near[still]
-            v[nodes] -= a[None, :, None] * gap_modes[still][:, None, :]
-            held += len(nodes)
+        held += hold(np.flatnonzero((np.abs(along) <= tolerance_m) & (across <= punch.radius_m)), a,
+                     basis.advance_modes_m)
     if held == 0:
         return basis
     old_full = np.vstack([basis.node_modes_m, basis.advance_modes_m[None]])

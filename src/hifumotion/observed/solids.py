@@ -62,14 +62,10 @@ def known_solids(plane: Plane, setup: Setup, bar_margin_mm: float = 0.0) -> Soli
     bar_mm = None
     b = setup.bar
     if b.enabled:
-        axis = np.asarray(b.direction, float)
-        axis = axis / np.linalg.norm(axis)
-        d = pts - np.asarray(b.tip_at_rest_mm, float)
-        along = d @ axis
-        radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
+        along, radial = _bar_coordinates(pts, b)
         m = float(bar_margin_mm)
         bar = (along <= m) & (along >= -b.length_mm - m) & (radial <= b.radius_mm + m)
-        bar_mm = bar_distance_mm(pts, b, edge_radius_mm=0.0) - m
+        bar_mm = _rounded_rectangle_mm(along, radial, b, 0.0) - m
     return Solids(floor, bar & ~floor, (floor_mm / px).astype(np.float32),
                   None if bar_mm is None else (bar_mm / px).astype(np.float32))
 
@@ -80,12 +76,23 @@ def bar_distance_mm(points_mm: np.ndarray, bar, edge_radius_mm: float | None = N
     ``length_mm`` back from its tip along ``direction``, both ends' rims rounded by
     ``edge_radius_mm`` (default the bar's own; 0 for sharp) — a rounded rectangle in (along the
     axis, from the axis), exactly."""
+    along, radial = _bar_coordinates(points_mm, bar)
+    return _rounded_rectangle_mm(along, radial, bar, bar.edge_radius_mm if edge_radius_mm is None else edge_radius_mm)
+
+
+def _bar_coordinates(points_mm: np.ndarray, bar) -> tuple[np.ndarray, np.ndarray]:
+    """``(along, radial)`` (mm) of points from the resting bar's tip: along its axis (into the
+    tissue), and from the axis."""
     axis = np.asarray(bar.direction, float)
     axis = axis / np.linalg.norm(axis)
     d = np.asarray(points_mm, float) - np.asarray(bar.tip_at_rest_mm, float)
     along = d @ axis
-    radial = np.linalg.norm(d - along[..., None] * axis, axis=-1)
-    e = float(bar.edge_radius_mm if edge_radius_mm is None else edge_radius_mm)
+    return along, np.linalg.norm(d - along[..., None] * axis, axis=-1)
+
+
+def _rounded_rectangle_mm(along: np.ndarray, radial: np.ndarray, bar, edge_radius_mm: float) -> np.ndarray:
+    """The bar's signed distance (mm) in its (along, radial) coordinates, rims rounded by ``edge_radius_mm``."""
+    e = float(edge_radius_mm)
     half = 0.5 * float(bar.length_mm)
     # the rounded rectangle's SDF: centred on the axis half a length back from the tip
     qa = np.abs(along + half) - (half - e)

@@ -135,23 +135,21 @@ class OnlineAssimilator:
         self.q0 = self.state.q.copy()
         # a driven bar's travel counts from its place on the settled tissue (as the model's runs)
         self.rest_m = float(model.basis.advance_modes_m @ self.q0)
-        self.force_n = 0.0
         self.scale = 1.0
         self.cov = np.zeros((r + 1, r + 1))
         self.cov[r, r] = s.initial_scale_std ** 2
         self.frame = 0
         self.stats = step_counters(model)
 
-    def _forecast(self, state: ReducedState, scale: float, dt: float) -> ReducedState:
+    def _forecast(self, state: ReducedState, scale: float, dt: float) -> tuple[ReducedState, float]:
+        """One step of ``dt`` at the push's (or drive's) ``scale``: the new state and the bar's force (N)."""
         if self.travel is None:
             force = scale * float(self.schedule(state.t_s + dt))
             new, _ = self.model.step(state, self.loads, dt, force, self.stats, error=False)
-            self.force_n = force
-        else:
-            advance = self.rest_m + scale * float(self.travel(state.t_s + dt))
-            new, _ = self.model.step(state, self.loads, dt, 0.0, self.stats, error=False, advance_m=advance)
-            self.force_n = float(self.stats["bar_force_n"])
-        return new
+            return new, force
+        advance = self.rest_m + scale * float(self.travel(state.t_s + dt))
+        new, _ = self.model.step(state, self.loads, dt, 0.0, self.stats, error=False, advance_m=advance)
+        return new, float(self.stats["bar_force_n"])
 
     def assimilate(self, observed_mm: np.ndarray, horizons_frames=(), quality: np.ndarray | None = None
                    ) -> FrameEstimate:
@@ -167,8 +165,7 @@ class OnlineAssimilator:
             raise InputError(f"expected {len(self.h)} displacement coordinates, got {y.shape}", "observed_mm")
         r = self.model.basis.size
         dt = self.dt
-        nominal = self._forecast(self.state, self.scale, dt)
-        taken = self.force_n        # a driven bar's force: what the forecast's step took
+        nominal, taken = self._forecast(self.state, self.scale, dt)   # a driven bar's force: what it took
         # the forecast's Jacobian, the step's own linearisation: its last round's matrix (friction
         # included) on the subspace its pressed contacts leave free, applied to what q and a
         # bring to its right-hand side (M/Δt² + C/Δt per unit q; F(t₊) v_s per unit a, a driven
@@ -209,7 +206,7 @@ class OnlineAssimilator:
         self.frame += 1
         predicted = {}
         for k in horizons_frames:
-            ahead = self._forecast(self.state, self.scale, int(k) * dt)
+            ahead, _ = self._forecast(self.state, self.scale, int(k) * dt)
             predicted[int(k)] = self.h @ (ahead.q - self.q0) / MM
         force = self.scale * float(self.schedule(self.state.t_s)) if self.travel is None else taken
         return FrameEstimate(self.frame, self.scale, force, float(np.sqrt(self.cov[r, r])), y,

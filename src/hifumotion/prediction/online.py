@@ -212,6 +212,7 @@ class OnlineSession:
         from hifumotion.observed.solids import imaging_plane, known_solids
         from hifumotion.prediction.assimilate import OnlineAssimilator, points_observation
         from hifumotion.speckle import SpeckleTracker
+        from hifumotion.speckle.follow import tracker_solids
 
         tell = progress or (lambda stage, fraction: None)
         self.horizons = sorted({int(h) for h in horizons_frames})
@@ -243,9 +244,7 @@ class OnlineSession:
             self.filter = OnlineAssimilator(self.model, scene_material(scene), scene.bar.schedule(), h, self.dt,
                                             settings)
         solids = known_solids(plane, setup)
-        self.tracker = SpeckleTracker(frame0, self.pixel_mm, exclude=solids.floor, rigid=solids.bar,
-                                      exclude_distance_px=solids.floor_distance_px,
-                                      rigid_distance_px=solids.bar_distance_px)
+        self.tracker = SpeckleTracker(frame0, self.pixel_mm, **tracker_solids(solids))
         self.shape = frame0.shape
         self.points_px = plane.to_pixels(spec.points_mm)            # the model's points A on frame 0
         self.a0 = spec.points_mm @ axes.T - np.asarray(plane.origin_mm, float) @ axes.T   # the same, image mm

@@ -74,8 +74,8 @@ class SolidSurface:
         direction = None
         if along is not None and np.hypot(*along) > 0:
             direction = np.asarray(along, np.float32) / np.float32(np.hypot(*along))
-        steps = [direction] * iterations + [None, None]
-        for d in (steps if direction is not None else [None, None]):
+        # along the motion first (if any), then the normal for what is still inside
+        for d in ([direction] * iterations if direction is not None else []) + [None, None]:
             mx, my = x - np.float32(sx), y - np.float32(sy)
             depth = sample(self.distance_px, mx, my)
             inside = depth < 0

@@ -58,6 +58,16 @@ class FollowResult:
         return np.stack([c.points_px for c in self.contours])
 
 
+def tracker_solids(solids: Solids | None) -> dict:
+    """The known solids as :func:`~hifumotion.speckle.displacement`'s (and
+    :class:`~hifumotion.speckle.SpeckleTracker`'s) keyword arguments: the floor's and the bar's
+    masks, and their signed distances where the geometry gave them; none without solids."""
+    if solids is None:
+        return {}
+    return {"exclude": solids.floor, "rigid": solids.bar, "exclude_distance_px": solids.floor_distance_px,
+            "rigid_distance_px": solids.bar_distance_px}
+
+
 def carry_contour(contour_px: np.ndarray, series: DisplacementSeries, frame: int) -> tuple[np.ndarray, np.ndarray]:
     """Frame-0 contour points ``(N, 2)`` px moved to ``frame``: their positions (px) and quality."""
     return carry_points(contour_px, series.displacement_mm[frame], series.quality[frame], series.spacing_mm)
@@ -220,11 +230,7 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
     points0 = contour0.resampled(point_step_px).points_px
     first_s = time.perf_counter() - t0
     if series is None:
-        series = track_speckle(frames, spacing_mm, exclude=None if solids is None else solids.floor,
-                               rigid=None if solids is None else solids.bar,
-                               exclude_distance_px=None if solids is None else solids.floor_distance_px,
-                               rigid_distance_px=None if solids is None else solids.bar_distance_px,
-                               progress=progress)
+        series = track_speckle(frames, spacing_mm, progress=progress, **tracker_solids(solids))
     contours, masks, quality = [], [], []
     # the water's grey level, for the solids in a refined frame (frame 0 away from target and solids)
     background = float(np.median(frames[0][~first.mask & ~first.excluded])) if refine_iterations > 0 else 0.0
@@ -254,4 +260,5 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
     return FollowResult(np.stack(masks), contours, series, np.stack(quality), seconds, first)
 
 
-__all__ = ["FollowResult", "TargetSegmentation", "follow", "carry_contour", "carry_points", "segment_target"]
+__all__ = ["FollowResult", "TargetSegmentation", "follow", "carry_contour", "carry_points", "segment_target",
+           "tracker_solids"]
