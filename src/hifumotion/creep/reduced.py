@@ -48,6 +48,7 @@ import numpy as np
 from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rates
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
 from hifumotion.creep.nnls import load_compiled, nnls_from
+from hifumotion.creep.reduced_bar import ReducedBarRows
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
@@ -238,7 +239,7 @@ class ReducedCreep:
         self.particle_modes_mm = np.ascontiguousarray(ve.reshape(len(elements), 8, 3, -1).mean(axis=1).reshape(
             3 * len(elements), -1) / MM)
         self.settled_particles_mm = self.mesh.particles(basis.settled_nodes_mm)
-        self.rows, self.bound, self._face = self._contact_rows(solver.contacts)
+        self.rows, self.bound, self._bar = self._contact_rows(solver.contacts)
         self._pressed = np.zeros(0, np.int64)   # the rows the last contact solve pressed (its warm start)
         load_compiled()                          # the contact solver's machine code, now rather than in a step
         self._linearised = (np.eye(basis.size), None)   # the last solve's matrix and pressed rows (solve_response)
@@ -263,56 +264,45 @@ class ReducedCreep:
         self.__dict__.update(state)
         load_compiled()
 
-    def _contact_rows(self, contacts):
-        """Non-penetration of the contact candidates as ``rows @ q ≥ bound`` (m), and the bar
-        face's rows: ``(which rows, their nodes' offsets across the axis at q = 0 (m), and
-        those offsets' modes)``, so that a row holds only while its node is under the face.
+    def _contact_rows(self, contacts) -> tuple[np.ndarray, np.ndarray, ReducedBarRows | None]:
+        """Non-penetration of the contact candidates: the planes' as fixed ``rows @ q ≥ bound``
+        (m), the bar's as :class:`~.reduced_bar.ReducedBarRows`, linearised at each step's start.
 
-        A candidate's gap is ``g₀ + G q``: a plane's ``n·(x − p)``, the bar's face
-        ``a·(x − tip) − s``; rows whose G vanishes (a node every mode keeps on its solid) are
-        left out. A node that starts inside a solid may not go deeper (bound −max(g₀, 0))."""
+        A plane candidate's gap is ``g₀ + G q``, ``n·(x − p)``; rows whose G vanishes (a node
+        every mode keeps on its plane) are left out. A node that starts inside a plane may not go
+        deeper (bound −max(g₀, 0))."""
         b = self.basis
         settled = b.settled_nodes_mm * MM
         v = b.node_modes_m.reshape(len(settled), 3, -1)
         # a node as far from a solid as the snapshots' largest motion may reach it
         reach = self.settings.contact_reach * self.dx_m + b.max_motion_mm * MM
         surface = np.unique(self.mesh.surface_faces())
-        rows, bound = [], []
+        rows, bound = [np.zeros((0, b.size))], [np.zeros(0)]
         for k, plane in enumerate(contacts.planes):
             normal = contacts.body_frames[k, 0]
             gap = (settled[surface] - np.asarray(plane.point_m)) @ normal
             near = surface[gap < reach]
             rows.append(np.einsum("k,nkr->nr", normal, v[near]))
             bound.append(-np.maximum(gap[gap < reach], 0.0))
-        if contacts.punch is not None:
-            a = contacts.body_frames[contacts.punch_index, 0]
-            rel = settled[surface] - (np.asarray(contacts.punch.tip_m) + b.advance_at_rest_mm * MM * a)
-            along = rel @ a
-            across = np.linalg.norm(rel - along[:, None] * a, axis=1)
-            near = (along < reach) & (across <= contacts.punch.radius_m + reach)
-            rows.append(np.einsum("k,nkr->nr", a, v[surface[near]]) - b.advance_modes_m[None])
-            bound.append(-np.maximum(along[near], 0.0))
-            lateral = rel[near] - along[near, None] * a[None]
-            lateral_modes = v[surface[near]] - np.einsum("k,nkr->nr", a, v[surface[near]])[:, None, :] * a[None, :, None]
         rows, bound = np.vstack(rows), np.concatenate(bound)
-        active = np.abs(rows).max(axis=1) > 1e-9 * np.abs(rows).max()
-        face = None
+        active = np.abs(rows).max(axis=1) > 1e-9 * max(np.abs(rows).max(initial=0.0), 1e-300)
+        bar = None
         if contacts.punch is not None:
-            # the face's rows come last: their places among the rows kept
-            first = len(bound) - len(lateral)
-            keep = active[first:]
-            position = np.arange(int(active[:first].sum()), int(active.sum()))
-            face = (position, lateral[keep], lateral_modes[keep], contacts.punch.radius_m)
-        return np.ascontiguousarray(rows[active]), bound[active], face
+            # the bar meets the nodes as far as they move and as far as it moves
+            travel = (float(np.abs(b.advance_modes_m @ b.snapshot_coordinates).max())
+                      if b.snapshot_coordinates.size else 0.0)
+            bar = ReducedBarRows(contacts, settled, v, b.advance_modes_m, b.advance_at_rest_mm * MM, surface,
+                                 reach + travel)
+        return np.ascontiguousarray(rows[active]), bound[active], bar
 
-    def _rows_at(self, q: np.ndarray) -> np.ndarray:
-        """Which contact rows hold at ``q``: all the planes', the bar face's for nodes under it."""
-        holds = np.ones(len(self.rows), bool)
-        if self._face is not None:
-            position, lateral, modes, radius = self._face
-            across = np.linalg.norm(lateral + modes @ q, axis=1)
-            holds[position] = across <= radius
-        return holds
+    def _rows_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The contact rows at ``q`` (``rows @ q₊ ≥ bound``) and which of them hold: every plane's,
+        the bar's linearised there."""
+        if self._bar is None:
+            return self.rows, self.bound, np.ones(len(self.rows), bool)
+        rows, bound, holds = self._bar.rows_at(q)
+        return (np.vstack([self.rows, rows]), np.concatenate([self.bound, bound]),
+                np.concatenate([np.ones(len(self.rows), bool), holds]))
 
     def _solve(self, a: np.ndarray, rhs: np.ndarray, stats: dict, at: np.ndarray) -> np.ndarray:
         """``argmin ½ qᵀ a q − rhsᵀ q`` with the gap of every candidate that holds at ``at`` ≥ 0.
@@ -323,8 +313,8 @@ class ReducedCreep:
         until none is (the result is then the whole problem's)."""
         q = np.linalg.solve(a, rhs)
         tol = self.settings.contact_tolerance * self.dx_m
-        holds = self._rows_at(at)
-        rows, bound = self.rows[holds], self.bound[holds]
+        rows, bound, holds = self._rows_at(at)
+        rows, bound = rows[holds], bound[holds]
         violated = rows @ q < bound - tol
         if len(rows) == 0 or not violated.any():
             self._pressed = np.zeros(0, np.int64)
@@ -569,7 +559,7 @@ class ReducedState:
 def step_counters(model: ReducedCreep) -> dict:
     """The counters a run or a loop of steps keeps (steps, rejected, contact solves)."""
     return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0, "nnls_fallbacks": 0,
-            "contact_rows": len(model.rows), "friction_rounds": 0,
+            "contact_rows": len(model.rows) + (model._bar.size if model._bar is not None else 0), "friction_rounds": 0,
             "friction_candidates": model.friction.size if model.friction is not None else 0,
             "viscous_voxels": model.sampled.size, "viscous_fit_residual": model.sampled.residual}
 
