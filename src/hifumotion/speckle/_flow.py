@@ -26,6 +26,8 @@ import numpy as np
 
 from hifumotion.errors import InputError
 
+#: ``flow(reference, moving, initial) -> (H, W, 2)``; a flow that averages over a window carries
+#: its half-width as ``support_px`` (px): within it of the image's edge the window is cut short.
 Flow = Callable[[np.ndarray, np.ndarray, np.ndarray | None], np.ndarray]
 
 
@@ -83,6 +85,7 @@ def farneback_flow(levels: int = 0, window_px: int = 15, iterations: int = 1) ->
         return cv2.calcOpticalFlowFarneback(_u8(reference), _u8(moving), out, 0.5, levels, window_px, iterations,
                                             5, 1.1, flags)
 
+    flow.support_px = int(window_px) // 2 * 2 ** int(levels)
     return flow
 
 
@@ -95,6 +98,7 @@ def ilk_flow(radius_px: int = 7) -> Flow:
                                 num_warp=5, prefilter=True)
         return np.dstack([u, v]).astype(np.float32)
 
+    flow.support_px = int(radius_px)
     return flow
 
 

@@ -351,6 +351,12 @@ class SpeckleTracker:
         fwhm = speckle_fwhm_px(frame0, bright if bright.sum() > 64 else None)
         self.sigma = (smoothing * fwhm[0] / 2.355, smoothing * fwhm[1] / 2.355)
         self.lk_sigma = (lk_window * fwhm[0] / 2.355, lk_window * fwhm[1] / 2.355)
+        # (rows, cols) px from the image's edge within which an estimate's window is cut short:
+        # the flow's own, the Lucas–Kanade Gaussian's (2 σ) and the quality's
+        support = getattr(self.flow, "support_px", 0)
+        self.edge_margin_px = tuple(
+            int(np.ceil(max(support, 2.0 * s if lk_iterations > 0 else 0.0, QUALITY_WINDOW_PX // 2)))
+            for s in self.lk_sigma)
         tissue_level = float(np.median(frame0[bright])) if bright.any() else 1.0
         background = float(np.median(frame0[~bright & ~solid0])) if (~bright & ~solid0).any() else 0.0
         self.element = None
@@ -422,6 +428,14 @@ class SpeckleTracker:
         weight *= weight
         if any_solid:   # the material now under a solid, and the reference's own solids
             weight[_remap_mask(covered, ahead_x, ahead_y) | self.covered_key] = 0.0
+        # material that has left the image has no speckle to match, and the estimate of material
+        # whose window holds some is pulled towards the edge's replicated pixels: both take
+        # their neighbours' instead (docs/decisions.md, "Material that leaves the image")
+        h, w = self.shape
+        gone = (ahead_x < 0) | (ahead_x > w - 1) | (ahead_y < 0) | (ahead_y > h - 1)
+        if gone.any():
+            mr, mc = self.edge_margin_px
+            weight[cv2.dilate(gone.view(np.uint8), np.ones((2 * mr + 1, 2 * mc + 1), np.uint8)).view(bool)] = 0.0
         if self.smoothing > 0:
             v = normalized_convolution(v, weight, self.sigma)
             if self.fill == "plane" and self.rigid is not None and self.tissue_key is not None:
