@@ -357,6 +357,14 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
         assert "value" in params["parameters"][name] and "determined" in params["parameters"][name]
     assert params["fit"]["runs"] > 5 and (cal / "search_log.jsonl").is_file()
     assert (cal / "model" / "scene.toml").is_file() and (cal / "observation" / "tissue.vtp").is_file()
+    # the model kept is the one that fits the training frames better, saved with its own parameters
+    mapping, model = params["fit"]["space_mapping"], params["model"]
+    kept_search = mapping["cost_search_model_mm"] < mapping["cost_final_model_mm"]
+    assert mapping["model_kept"] == ("search" if kept_search else "final")
+    assert (model["tissue_particles"] == model["search_tissue_particles"]) == kept_search
+    theta = mapping["theta_search" if kept_search else "theta_final"]
+    assert params["parameters"]["youngs_modulus_pa"]["value"] == pytest.approx(np.exp(theta[0]), rel=1e-9)
+    assert params["parameters"]["poisson_ratio"]["value"] == pytest.approx(theta[1], rel=1e-9)
     out = subprocess.run(cli + ["predict", str(cal), "-o", str(pred), "--online", "2,4"], capture_output=True, text=True,
                          timeout=600)
     assert out.returncode == 0, out.stderr + out.stdout

@@ -19,7 +19,10 @@
    model's is taken as fixed, and a Gauss–Newton step with the search model's
    Jacobian moves the parameters to where the final model fits; repeated
    (``mapping_runs`` runs of the final model), keeping the best parameters the
-   final model was actually run with.
+   final model was actually run with. If the search model at its own fit still fits the
+   training frames better than the final model does at its best (``keep_better_model``),
+   the search model is the one the calibration keeps: the finer mesh is not always the
+   better model of a slide (its bar's trailing rim can catch the sample, docs/decisions.md).
 5. **Uncertainty**: standard errors and identifiability from the Jacobian; the
    F–E–β1 scaling the push cannot see, run and reported.
 """
@@ -64,7 +67,7 @@ class Calibration:
     mapped: dict                    # the space-mapping step: before/after
     degeneracy: list
     correlation: list
-    spec: ModelSpec                 # the final (paper-resolution) model
+    spec: ModelSpec                 # the model kept: the final (paper-resolution) one, or the search model if it fits better
     search_spec: ModelSpec
     observation: Observation
     runs: int
@@ -230,12 +233,19 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
                     current = np.clip(current + np.clip(step, -limit, limit), space.lower, space.upper)
                     tell("map", len(tried) / s.mapping_runs)
             best_cost, best_theta, best_r = min(tried, key=lambda t: t[0])
+            search_cost = float(np.abs(r_search).sum())
+            keep_search = s.keep_better_model and search_cost < best_cost
             mapped = {**mapped, "theta_search": theta.tolist(), "theta_final": best_theta.tolist(),
-                      "cost_search_model_mm": float(np.abs(r_search).sum()),
+                      "cost_search_model_mm": search_cost,
                       "final_model_costs_mm": [c for c, _, _ in tried],
                       "cost_final_model_mm": best_cost,
-                      "S_t_final_model_mm": frame_sums_mm(best_r).round(3).tolist()}
-            theta = best_theta
+                      "S_t_final_model_mm": frame_sums_mm(best_r).round(3).tolist(),
+                      "model_kept": "search" if keep_search else "final"}
+            if keep_search:
+                # the same training frames, the same objective: the search model fits them better
+                final = search
+            else:
+                theta = best_theta
             timings["space_mapping_s"] = time.perf_counter() - t3
             tell("map", 1.0)
     std = {n: float(v) for n, v in zip(space.names, unc.std)}   # inf: not seen by the data

@@ -95,6 +95,9 @@ class CalibrationSettings(ConfigModel):
     table1_max_runs: int = Field(120, ge=1, le=100_000, description="Table 1: most forward runs")
     space_mapping: bool = Field(True, description="implicit search: map the search model's fit to the final model (output space mapping)")
     mapping_runs: int = Field(3, ge=1, le=100, description="runs of the final model in the space mapping (each verified)")
+    keep_better_model: bool = Field(True, description="implicit search: after the space mapping, predict with whichever "
+                                    "model — the search model at its fit or the final model at its best mapped "
+                                    "parameters — fits the training frames better (both costs in parameters.json)")
     degeneracy_check: bool = Field(True, description="run and report the F–E–β1 scaling the push cannot see")
     fit_friction: bool | None = Field(
         None, description="fit the friction of the floor and the bar's face (ln μ_f, 0.02 … 1) as a fifth "
