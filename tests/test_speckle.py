@@ -337,7 +337,11 @@ def test_tissue_compressed_by_a_bar_is_tracked_down_to_its_face(scatterers):
     compressed linearly towards row 0 (u_y = −10 · row / 90 under the bar, tapering to 0 over
     16 px beside it): the speckle under the bar's bloom cannot be seen, so its displacement is
     inferred. Kept out of the bar, the tissue just under the face (rows 78–89, columns 44–83)
-    is within 1.2 px RMS of the truth (filled from the tissue around alone: 1.55 px)."""
+    is within 0.6 px RMS of the truth, with the reference frame renewed rarely (0.6) or often
+    (0.85): 0.30 and 0.23 px measured. (Filled from the tissue around alone: 1.55 px; with the
+    bar's pixels showing the last frame's estimate rather than one carried on at its rate,
+    the tissue beside the bar lagged a frame and each new reference kept that lag: 1.18 and
+    1.84 px.)"""
     face, push = 90.0, 10.0
 
     def taper(c):
@@ -355,10 +359,11 @@ def test_tissue_compressed_by_a_bar_is_tracked_down_to_its_face(scatterers):
         frames.append(image(scatterers, pos, lambda p, amp=amp: amp))
     rows, cols = np.mgrid[0:SHAPE[0], 0:SHAPE[1]]
     bar = (rows >= face) & (cols >= 40) & (cols < 88)
-    series = displacement(np.stack(frames), PX, rigid=bar)
     under = (rows >= 78) & (rows < 90) & (cols >= 44) & (cols < 84)
     truth = -push * (rows / face) * taper(cols)
-    error = series.displacement_mm[-1][..., 1][under] / PX - truth[under]
-    assert np.sqrt(np.mean(error ** 2)) < 1.2
-    now_row = rows[under] + series.displacement_mm[-1][..., 1][under] / PX
-    assert now_row.max() <= face - push - 0.5 + 0.25          # none of it inside the bar
+    for keyframe_quality in (0.6, 0.85):
+        series = displacement(np.stack(frames), PX, rigid=bar, keyframe_quality=keyframe_quality)
+        error = series.displacement_mm[-1][..., 1][under] / PX - truth[under]
+        assert np.sqrt(np.mean(error ** 2)) < 0.6, keyframe_quality
+        now_row = rows[under] + series.displacement_mm[-1][..., 1][under] / PX
+        assert now_row.max() <= face - push - 0.5 + 0.25          # none of it inside the bar

@@ -379,6 +379,7 @@ class SpeckleTracker:
         self.reference_u8 = _u8(frame0)
         self.u_key = np.zeros((h, w, 2), np.float32)       # frame 0 → reference (frame-0 grid, px)
         self.v = np.zeros((h, w, 2), np.float32)           # reference → current (reference grid, px)
+        self.step = np.zeros((h, w, 2), np.float32)        # the last frame's change of v (px; kept across a new reference)
         self.textured = None                               # frame-0 pixels with speckle to track (set at frame 1)
         self.lk = None                                     # the Lucas–Kanade refinement against the reference
         self.tissue_key = None                             # the same pixels on the reference's grid
@@ -400,20 +401,24 @@ class SpeckleTracker:
         if frame.shape != self.shape:
             raise InputError(f"expected a frame of shape {self.shape}, got {frame.shape}", "frame")
         frame = unit_frames(frame[None])[0]
-        gx, gy, v = self.gx, self.gy, self.v
+        gx, gy, v_last = self.gx, self.gy, self.v
+        # the estimate carried on at the last frame's rate: what the solids' pixels show and where
+        # the flow starts. Shown the last frame's estimate instead, the tissue beside the bar is
+        # pulled a frame behind — a lag each new reference keeps for good (docs/decisions.md)
+        v = v_last + self.step
         shift = self.rigid_tracker.update(frame) if self.rigid_tracker is not None else np.zeros(2, np.float32)
         covered, bar_now = self._solids_at(shift)
         current = _u8(frame)
         any_solid = covered.any() or self.covered_key.any()
         if any_solid:
             # where a solid is (now, or was in the reference) frame t shows the reference moved
-            # by the estimate so far: those pixels agree with it, and no solid's motion reaches
-            # the tissue through the estimator's window
+            # by the estimate carried on: those pixels agree with it, and no solid's motion
+            # reaches the tissue through the estimator's window
             back_x, back_y = gx - v[..., 0], gy - v[..., 1]
             replace = covered | (_remap_mask(self.covered_key, back_x, back_y))
             moved = cv2.remap(self.reference_u8, back_x, back_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             current = np.where(replace, moved, current)
-        # register frame t directly to the reference, starting from the previous estimate
+        # register frame t directly to the reference, starting from the estimate carried on
         v = self.flow(self.reference_u8, current, v)
         if self.lk_iterations > 0:
             # Farnebäck's polynomial model of the speckle leaves a bias where the tissue is
@@ -451,6 +456,7 @@ class SpeckleTracker:
             out = self.u_key + _remap(v, mx, my)
             quality = np.sqrt(np.clip(_remap(weight, mx, my), 0.0, 1.0))
         out = self._outside_solids(out, shift)
+        self.step = v - v_last
         self.v = v
         self.rigid_shift_px = np.asarray(shift, np.float32)
         t = self.frames_seen
