@@ -171,8 +171,9 @@ class DisplacementSeries:
 #: Width of the Lucas–Kanade window in speckle sizes (σ = this × the speckle's FWHM / 2.355 per axis),
 #: chosen on a twin outside the benchmark's (docs/decisions.md).
 LK_WINDOW = 6.0
-#: Start a new reference frame (keyframe) when the median quality of the tissue falls below this.
-KEYFRAME_QUALITY = 0.6
+#: Start a new reference frame (keyframe) when the median quality of the tissue falls below this
+#: fraction of the first frame's (docs/decisions.md, "Re-anchoring relative to the first match").
+KEYFRAME_QUALITY = 0.85
 
 
 class LucasKanade:
@@ -381,6 +382,7 @@ class SpeckleTracker:
         self.v = np.zeros((h, w, 2), np.float32)           # reference → current (reference grid, px)
         self.step = np.zeros((h, w, 2), np.float32)        # the last frame's change of v (px; kept across a new reference)
         self.textured = None                               # frame-0 pixels with speckle to track (set at frame 1)
+        self.first_quality = 1.0                           # their median quality at frame 1
         self.lk = None                                     # the Lucas–Kanade refinement against the reference
         self.tissue_key = None                             # the same pixels on the reference's grid
         self.rigid_shift_px = np.zeros(2, np.float32)
@@ -464,8 +466,11 @@ class SpeckleTracker:
         if self.textured is None:
             self.textured = (quality > 0.5) & ~self.solid0
             self.tissue_key = self.textured
+            # the first frame's match: as good as a match gets in this noise (the threshold is
+            # relative to it, so noisy images do not start a new reference at every frame)
+            self.first_quality = float(np.median(quality[self.textured])) if self.textured.any() else 1.0
         if (self.keyframe_quality > 0 and self.textured.any()
-                and np.median(quality[self.textured]) < self.keyframe_quality):
+                and np.median(quality[self.textured]) < self.keyframe_quality * self.first_quality):
             # a new reference: the speckle has decorrelated from the old one
             self.key, self.u_key, self.v = t, out.copy(), np.zeros_like(v)
             # frame 0's tissue pixels seen from the new reference (X ≈ Y − u(Y))
@@ -510,7 +515,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
     Each frame is registered directly to the current reference frame (frame 0, or the
     last keyframe), starting from the previous frame's estimate, so the error does not grow
     with the number of frames (no frame-to-frame drift). When the tissue's speckle has
-    decorrelated from the reference (median quality below ``keyframe_quality``), the current
+    decorrelated from the reference (median quality below ``keyframe_quality`` times the
+    first frame's), the current
     frame becomes the new reference and the maps are composed.
 
     Solids are known: ``exclude`` (static, such as the pool's floor) and ``rigid`` (one that
@@ -540,7 +546,8 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         speckle's FWHM / 2.355 on each axis); 0 for none (occluded pixels are then left as
         the flow gave them).
     keyframe_quality
-        The median quality below which a new reference frame is started (0: never).
+        The median quality, as a fraction of the first frame's match (the noise's own
+        floor), below which a new reference frame is started (0: never).
     lk_iterations, lk_window
         Lucas–Kanade steps after the flow (:class:`LucasKanade`; 0 for none) and their
         window in speckle sizes.
