@@ -63,6 +63,7 @@ def dis_flow(patch_px: int = 8, stride_px: int = 3) -> Flow:
             return dis.calc(_u8(reference), _u8(moving), np.ascontiguousarray(initial, np.float32))
         return dis.calc(_u8(reference), _u8(moving), None)
 
+    flow.support_px = int(patch_px)
     return flow
 
 
