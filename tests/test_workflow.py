@@ -151,7 +151,7 @@ tip_at_rest_mm = {list(setup['bar']['tip_at_rest_mm'])}
 [push]
 ramp_s = {setup['push']['ramp_s']}
 [estimation]
-particles = 200
+particles = 300
 search_particles = 200
 max_evaluations = 1
 horizons_frames = []
@@ -178,6 +178,9 @@ masks = "{folder / 'truth' / 'frames'}"
     assert np.abs(a.astype(int) - b.astype(int)).max() <= 1
     summary = _check_outputs(out, setup["frames"], 4)
     assert summary["truth"] == "expert masks" and summary["validation_dsc_mean"] > 0.85
+    # two resolutions: the report says which one predicts, as parameters.json does
+    kept = json.loads((out / "calibration" / "parameters.json").read_text())["fit"]["space_mapping"]["model_kept"]
+    assert f"model kept (training cost, mm)</td><td>{kept} (search" in (out / "report" / "report.html").read_text()
     why = _check_in_browser(out / "report" / "report.html")
     if why:
         pytest.skip(f"the run passed; its report was not opened in a browser: {why}")

@@ -325,6 +325,12 @@ def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: 
     facts = [["volume (mm³)", rec.volume_mm3], ["sweep planes", len(outcome.calibration.observation.observed.sweep)],
              ["model tissue particles", len(outcome.calibration.spec.tissue_mm)],
              ["model particle spacing (mm)", outcome.calibration.spec.spacing_mm]]
+    mapping = outcome.calibration.mapped
+    if "model_kept" in mapping:
+        # which of the two resolutions predicts: the one that fits the training frames better
+        facts.append(["model kept (training cost, mm)",
+                      f'{mapping["model_kept"]} (search {mapping["cost_search_model_mm"]:.1f}, '
+                      f'final {mapping["cost_final_model_mm"]:.1f})'])
     facts += [[k, val] for k, val in inputs.experiment_facts.items()]
     sections.append(("reconstruction", "Reconstructed tissue",
                      [figure(mesh_png.name, "The tissue reconstructed from the GLCV-segmented sweep"),
