@@ -709,7 +709,7 @@ def test_the_bars_rows_bound_its_rounded_solids_distance_from_below_and_touch_it
         np.testing.assert_allclose((rows @ at - bound)[outside], d_at[outside], rtol=0, atol=1e-15)
         linear = d_at + rows @ (q - at)
         assert np.all(linear <= d_q + 1e-12)
-        # the nodes span the rim, the side and the face: every kind of tangent plane was tried
+    # the nodes span the rim, the side and the face: every kind of tangent plane was tried
     _, normals = bar.distances_m(np.zeros(r))
     kinds = {"face": np.abs(normals @ axis) > 1 - 1e-9, "side": np.abs(normals @ axis) < 1e-9}
     assert all(k.any() for k in kinds.values()) and (~(kinds["face"] | kinds["side"])).any()
