@@ -300,9 +300,15 @@ class ReducedCreep:
         the bar's linearised there."""
         if self._bar is None:
             return self.rows, self.bound, np.ones(len(self.rows), bool)
+        # a step's friction rounds all solve at its start: the bar's rows are made once a step
+        cached = getattr(self, "_rows_cache", None)
+        if cached is not None and np.array_equal(cached[0], q):
+            return cached[1]
         rows, bound, holds = self._bar.rows_at(q)
-        return (np.vstack([self.rows, rows]), np.concatenate([self.bound, bound]),
-                np.concatenate([np.ones(len(self.rows), bool), holds]))
+        out = (np.vstack([self.rows, rows]), np.concatenate([self.bound, bound]),
+               np.concatenate([np.ones(len(self.rows), bool), holds]))
+        self._rows_cache = (q.copy(), out)
+        return out
 
     def _solve(self, a: np.ndarray, rhs: np.ndarray, stats: dict, at: np.ndarray) -> np.ndarray:
         """``argmin ½ qᵀ a q − rhsᵀ q`` with the gap of every candidate that holds at ``at`` ≥ 0.
