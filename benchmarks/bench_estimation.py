@@ -33,8 +33,12 @@ Usage (run it alone: parallel jobs slow each other's timings)::
 
 ``--compare-search`` calibrates each twin a second time with the other search model
 (``CalibrationSettings.search_integrator``: the search model's reduced model or its full
-runs) and reports issue 39's calibration targets: ≤ 30 s, and a validation DSC within
-0.001 and a centroid within 0.01 mm of the implicit search's fit.
+runs; ``--peer-set`` gives the peer's settings whole) and reports issue 39's calibration
+targets: ≤ 30 s, and a validation DSC within 0.001 and a centroid within 0.01 mm of the
+implicit search's fit. Issue 39's comparison is against today's default calibration::
+
+    python benchmarks/bench_estimation.py --methods least_squares --compare-search \
+        --set search_integrator=reduced,particles=1000 --peer-set search_integrator=implicit
 
 Twins are generated once into ``--work`` (default ``.bench/twins``; 4–8 min each) and
 re-used.
@@ -216,9 +220,17 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
             # calibration target (≤ 30 s, the fit as good as the implicit search's)
             ours = r["calibration_settings"]["search_integrator"]
             other = "implicit" if ours == "reduced" else "reduced"
+            # the peer: --peer-set's settings, or ours with the other search model
+            peer_settings = (_settings(args.peer_set) if args.peer_set is not None
+                             else {**_settings(args.set), "search_integrator": other})
             peer = calibrate_and_predict(observed, obs, train, valid, truth, params, method, args.workers, horizons,
-                                         tmp, {**_settings(args.set), "search_integrator": other})
+                                         tmp, peer_settings)
+            other = peer["calibration_settings"]["search_integrator"]
+            if other == ours:
+                raise SystemExit(f"--compare-search: the peer's search model is ours ({ours}); "
+                                 "--peer-set must name the other one")
             _tell(twin.name, f"{method} ({other} search)", peer)
+            r["search_comparison_settings"] = {"ours": _settings(args.set), "peer": peer_settings}
             runs = {ours: r, other: peer}
             out["methods"][method]["search_comparison"] = search_comparison(runs["reduced"], runs["implicit"])
     return out
@@ -283,6 +295,10 @@ def main() -> None:
     ap.add_argument("--no-bar-cap", action="store_true", help="do not continue the sweep's top under the bar")
     ap.add_argument("--compare-search", action="store_true",
                     help="also calibrate with the other search model (reduced/implicit) and compare (issue 39)")
+    ap.add_argument("--peer-set", default=None,
+                    help="--compare-search's peer settings in --set's form (default: --set's with the other search "
+                    "model), e.g. 'search_integrator=implicit' for the default calibration against "
+                    "--set 'search_integrator=reduced,particles=1000'")
     ap.add_argument("--quick", action="store_true",
                     help="one twin (slow_push_s42), least squares only: a few minutes once the twin exists")
     args = ap.parse_args()
@@ -292,6 +308,8 @@ def main() -> None:
         args.cases = ",".join(LARGE_MOTION_CASES)
     try:
         _settings(args.set)
+        if args.peer_set is not None:
+            _settings(args.peer_set)
     except ValueError as exc:
         ap.error(str(exc))
 

@@ -59,6 +59,10 @@ class CreepSettings:
     precision
         ``"mixed"``: the factorisation in single precision, its solutions refined by conjugate
         gradients to ``cg_rtol`` (:mod:`.linear`); ``"double"``: a double-precision factor.
+    kinematics
+        ``"small_strain"``: ``f = K u`` (a turned voxel is stressed); ``"corotational"``: each
+        voxel's rotation taken out of its strain (:mod:`.corotation`), so that a sample may
+        turn and slide far with no stress the turn made. The reduced model is small-strain.
     """
 
     tolerance: Positive = 0.005
@@ -75,6 +79,7 @@ class CreepSettings:
     newton_rounds: Annotated[int, Ge(0)] = 8
     solver: Literal["pardiso", "superlu"] | None = None
     precision: Literal["mixed", "double"] = "mixed"
+    kinematics: Literal["small_strain", "corotational"] = "small_strain"
 
 
 @dataclass

@@ -1,0 +1,191 @@
+"""Corotational kinematics of the voxel mesh: its elements' rotations taken out of their strain (SI).
+
+The fast path's elasticity (:mod:`.hexahedra`) is small-strain: ``f = K u``. A voxel that
+turns rigidly by an angle θ then carries a strain of order 1 − cos θ and a stress it should
+not (a sample turned by 20° is stressed as if stretched by 6 %). The paper's Eq. 13 measures
+strain by Green–Saint-Venant, which a rotation leaves at zero. The corotational formulation
+(Felippa & Haugen, CMAME 2005; Müller & Gross, GI 2004, "warped stiffness"; SOFA's
+``HexahedronFEMForceField``, method "polar") keeps the small-strain element but measures each
+voxel's deformation in its own rotated frame:
+
+    f_e = R_e K_e (R_eᵀ x_e − X_e),        x_e = X_e + u_e,
+
+``R_e`` the rotation of the polar decomposition ``F = R U`` of the deformation gradient at the
+voxel's centre. A rigid motion ``x = Q X + c`` gives ``R = Q`` and no force; ``R = I`` gives
+back ``K u``. Expanded, ``f_e = R_e K_e R_eᵀ u_e + R_e K_e (R_eᵀ − I) X_e``: a rotated
+stiffness and a load, which is how the backward-Euler step takes it (:mod:`.integrate`), the
+rotations lagged from the step's predictor as Eq. 16's μ is lagged (one Picard step). The
+viscosity's matrix turns with its voxel too, and its shear rate is read in the voxel's frame.
+The material law stays linear in the rotated frame: large rotations are exact, large
+stretches are not (docs/decisions.md, issue 41, part 3).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, parallel=True)
+def _rotations(u, elements, grads, grad_of, out):
+    for e in prange(elements.shape[0]):
+        g = grads[grad_of[e]]
+        f = np.eye(3)
+        for a in range(8):
+            n = elements[e, a]
+            for i in range(3):
+                ui = u[n, i]
+                for j in range(3):
+                    f[i, j] += ui * g[a, j]
+        w, _, vt = np.linalg.svd(f)
+        r = w @ vt
+        if np.linalg.det(r) < 0.0:   # an inverted voxel: the nearest proper rotation
+            for i in range(3):
+                w[i, 2] = -w[i, 2]
+            r = w @ vt
+        out[e] = r
+
+
+@njit(cache=True)
+def _scatter_rotated(emap, blocks, block_of, scale, rot, data):
+    """data[emap[e]] += scale[e] · R_e blocks[block_of[e]] R_eᵀ, node block by node block
+    (serial: elements share entries)."""
+    tmp = np.empty((3, 3))
+    for e in range(emap.shape[0]):
+        s = scale[e]
+        if s == 0.0:
+            continue
+        blk = blocks[block_of[e]]
+        r = rot[e]
+        for a in range(8):
+            for b in range(8):
+                # tmp = blk_ab R_eᵀ, then R_e tmp
+                for i in range(3):
+                    for j in range(3):
+                        acc = 0.0
+                        for k in range(3):
+                            acc += blk[3 * a + i, 3 * b + k] * r[j, k]
+                        tmp[i, j] = acc
+                for i in range(3):
+                    for j in range(3):
+                        acc = 0.0
+                        for k in range(3):
+                            acc += r[i, k] * tmp[k, j]
+                        data[emap[e, 3 * a + i, 3 * b + j]] += s * acc
+
+
+@njit(cache=True)
+def _rotation_loads(rest, elements, blocks, block_of, rot, out):
+    """out[node] += R_e K_e (R_eᵀ − I) X_e, X_e the voxel's corners from its centroid."""
+    x = np.empty((8, 3))
+    y = np.empty(24)
+    for e in range(elements.shape[0]):
+        r = rot[e]
+        c = np.zeros(3)
+        for a in range(8):
+            for i in range(3):
+                x[a, i] = rest[elements[e, a], i]
+                c[i] += x[a, i] / 8.0
+        for a in range(8):
+            for i in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += r[k, i] * (x[a, k] - c[k])     # (R_eᵀ X)_i
+                y[3 * a + i] = acc - (x[a, i] - c[i])
+        z = blocks[block_of[e]] @ y
+        for a in range(8):
+            n = elements[e, a]
+            for i in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += r[i, k] * z[3 * a + k]
+                out[n, i] += acc
+
+
+@njit(cache=True)
+def _rotated_rates(velocity, elements, blocks, block_of, rot, out):
+    """√(2 dev ε̇ : dev ε̇) (1/s) at each voxel's centre of the velocity seen in its frame (R_eᵀ v)."""
+    vloc = np.empty(24)
+    for e in range(elements.shape[0]):
+        r = rot[e]
+        for a in range(8):
+            n = elements[e, a]
+            for i in range(3):
+                vloc[3 * a + i] = r[0, i] * velocity[n, 0] + r[1, i] * velocity[n, 1] + r[2, i] * velocity[n, 2]
+        rate = blocks[block_of[e]] @ vloc
+        tr = (rate[0] + rate[1] + rate[2]) / 3.0
+        d0, d1, d2 = rate[0] - tr, rate[1] - tr, rate[2] - tr
+        dd = d0 * d0 + d1 * d1 + d2 * d2 + 0.5 * (rate[3] ** 2 + rate[4] ** 2 + rate[5] ** 2)
+        out[e] = np.sqrt(2.0 * dd)
+
+
+class Corotation:
+    """The rotated element matrices of a :class:`~.hexahedra.MeshMatrices` (module docstring).
+
+    ``two_g`` and ``kappa`` (Pa) make each voxel's stiffness ``2G·dev + κ·vol`` once; the
+    viscosity's blocks are per unit μ (Pa·s).
+    """
+
+    def __init__(self, matrices, rest_m: np.ndarray, two_g: float, kappa: float):
+        m = matrices
+        self.matrices = m
+        self.rest_m = np.ascontiguousarray(rest_m, float)
+        n_el = len(m.elements)
+        # block 0 is the exact cube's; block 1 + j the j-th distorted voxel's own
+        self.block_of = np.zeros(n_el, np.int64)
+        self.block_of[m.distorted] = 1 + np.arange(len(m.distorted))
+        self.stiffness = np.ascontiguousarray(np.concatenate(
+            [(two_g * m.cube.deviatoric + kappa * m.cube.volumetric)[None], two_g * m.dev + kappa * m.vol]))
+        self.viscous = np.ascontiguousarray(np.concatenate([m.cube.viscous[None], m.visc]))
+        self.centre_b = np.ascontiguousarray(np.concatenate([m.cube.centre_b[None], m.b0]))
+        # ∂N_a/∂X at the centre (1/m): B's normal rows hold it
+        b = self.centre_b
+        self.gradients = np.ascontiguousarray(np.stack(
+            [b[:, 0, 0::3], b[:, 1, 1::3], b[:, 2, 2::3]], axis=-1))   # (blocks, 8, 3)
+
+    def rotations(self, u_m: np.ndarray) -> np.ndarray:
+        """``(voxels, 3, 3)``: each voxel's rotation R_e (polar decomposition of F at its centre)
+        for the node displacements ``u_m`` ``(n, 3)``."""
+        out = np.empty((len(self.matrices.elements), 3, 3))
+        _rotations(np.ascontiguousarray(u_m, float), self.matrices.elements, self.gradients, self.block_of, out)
+        return out
+
+    def _assembled(self, blocks: np.ndarray, scale: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        asm = self.matrices.assembly
+        data = np.zeros(len(asm.indices))
+        _scatter_rotated(asm.emap, blocks, self.block_of, np.ascontiguousarray(scale, float), rot, data)
+        return data
+
+    def stiffness_data(self, rot: np.ndarray) -> np.ndarray:
+        """CSR data (on the mesh's pattern) of ``Σ_e R_e K_e R_eᵀ`` (N/m)."""
+        return self._assembled(self.stiffness, np.ones(len(rot)), rot)
+
+    def viscous_data(self, mu_pa_s: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        """CSR data of ``Σ_e μ_e R_e C_e R_eᵀ`` (N·s/m)."""
+        return self._assembled(self.viscous, np.broadcast_to(np.asarray(mu_pa_s, float), (len(rot),)), rot)
+
+    def loads(self, rot: np.ndarray) -> np.ndarray:
+        """``(n, 3)`` ``Σ_e R_e K_e (R_eᵀ − I) X_e`` (N): the elastic force is ``K_R u`` plus this."""
+        out = np.zeros_like(self.rest_m)
+        _rotation_loads(self.rest_m, self.matrices.elements, self.stiffness, self.block_of, rot, out)
+        return out
+
+    def forces(self, u_m: np.ndarray) -> np.ndarray:
+        """``(n, 3)`` the corotational elastic force ``Σ_e R_e K_e (R_eᵀ x_e − X_e)`` (N) at ``u_m``,
+        the rotations taken from ``u_m`` itself."""
+        import scipy.sparse as sp
+
+        rot = self.rotations(u_m)
+        asm = self.matrices.assembly
+        k = sp.csr_matrix((self.stiffness_data(rot), asm.indices, asm.indptr), shape=(asm.size, asm.size))
+        return (k @ np.asarray(u_m, float).ravel()).reshape(-1, 3) + self.loads(rot)
+
+    def rates(self, velocity_m_s: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        """Equivalent shear rate (1/s) of every voxel, its velocity read in its own frame."""
+        out = np.empty(len(rot))
+        _rotated_rates(np.ascontiguousarray(velocity_m_s, float), self.matrices.elements, self.centre_b,
+                       self.block_of, rot, out)
+        return out
+
+
+__all__ = ["Corotation"]
