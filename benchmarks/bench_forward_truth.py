@@ -80,7 +80,10 @@ def main() -> None:
     offset_mm = round(measure_boundary_offset(imaging, "glcv", seed=7919).offset_mm, 3)
     observed, obs, *_ = observe(args.twin, "tracked", "speckle", offset_mm)
     p = json.loads((args.twin / "truth" / "parameters.json").read_text())
-    k = Parameters(p["external_force_n"], p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"])
+    # a driven bar pushes no set force (its travel is in the scene); the floor's friction is the twin's
+    force = p["external_force_n"] if p.get("external_force_n") is not None else Parameters().force_n
+    k = Parameters(force, p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"],
+                   p.get("friction"))
     spec = model_spec(obs, ModelSettings(tissue_particles=args.particles))
     t0 = time.perf_counter()
     model = run_model(spec, k, args.last)

@@ -193,7 +193,8 @@ class CreepSolver:
         data[self.diag_index] += np.repeat(self.mass, 3) / dt ** 2 + self.anchor_stiffness
         return sp.csr_matrix((data, asm.indices, asm.indptr), shape=(asm.size, asm.size)), c
 
-    def _step_system(self, u: np.ndarray, v: np.ndarray, dt: float, mu: np.ndarray | None) -> tuple[sp.csr_matrix, np.ndarray]:
+    def _step_system(self, u: np.ndarray, v: np.ndarray, dt: float, mu: np.ndarray | None
+                     ) -> tuple[sp.csr_matrix, np.ndarray]:
         """The step's ``A`` and right-hand side (module docstring; with the corotational loads)."""
         a, c = self._matrices(dt, mu)
         base = self.body_force.ravel() + np.repeat(self.mass, 3) / dt ** 2 * (u + dt * v).ravel()
