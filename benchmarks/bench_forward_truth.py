@@ -9,7 +9,9 @@ contact law), the floor under any fit: a calibration cannot do better than this 
 frames it fits without absorbing the error into wrong parameters.
 
 Prints JSON: the run's time and solver counts, and every ``--every`` frames the RMS
-displacement error and the truth's and the model's RMS displacements (µm). Run it alone (2 cores)::
+displacement error (and its split: the points' common shift, the RMS left without it, and the
+RMS left without the best rigid motion of the model's points onto the truth's: the shape's own
+error) and the truth's and the model's RMS displacements (µm). Run it alone (2 cores)::
 
     python benchmarks/bench_forward_truth.py .bench/twins/push_release_s43-*/ --last 190
     python benchmarks/bench_forward_truth.py TWIN --set '{"stick_mm": 0.01}'   # CreepSettings fields
@@ -93,18 +95,36 @@ def main() -> None:
     positions, dx = truth["positions_mm"].astype(float), float(truth["spacing_mm"])
     a0 = model.points_mm[0]
     frames = list(range(0, min(len(model.points_mm), len(positions)), args.every))
-    error, size, size_model = [], [], []
+    error, size, size_model, shift, shape, rigid, angle = [], [], [], [], [], [], []
     follow, _ = material_weights(a0, positions[0], dx)   # the truth's material points A
     for f in frames:
         u_true = follow @ (positions[f] - positions[0])
         u_model = model.points_mm[f] - a0
         error.append(float(np.sqrt(((u_model - u_true) ** 2).sum(1).mean()) * 1000))
+        # the error split: a common shift of the points (the sample slid too far or too little)
+        # and what is left (its shape deformed otherwise)
+        mean = (u_model - u_true).mean(axis=0)
+        shift.append(float(np.linalg.norm(mean)) * 1000)
+        shape.append(float(np.sqrt(((u_model - u_true - mean) ** 2).sum(1).mean()) * 1000))
+        # and without the best rigid motion of the model's points onto the truth's (Kabsch): the
+        # error of the section's shape alone, whatever it slid and turned by
+        pm, pt = a0 + u_model, a0 + u_true
+        cm, ct = pm.mean(axis=0), pt.mean(axis=0)
+        w, _, vt = np.linalg.svd((pm - cm).T @ (pt - ct))
+        d = np.sign(np.linalg.det(w @ vt))
+        turn = (w @ np.diag([1.0, 1.0, d]) @ vt).T
+        rigid.append(float(np.sqrt((((pm - cm) @ turn.T + ct - pt) ** 2).sum(1).mean()) * 1000))
+        angle.append(float(np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1.0, 1.0)))))
         size.append(float(np.sqrt((u_true ** 2).sum(1).mean()) * 1000))
         size_model.append(float(np.sqrt((u_model ** 2).sum(1).mean()) * 1000))
     print(json.dumps({"twin": str(args.twin), "settings": changes, "seconds": round(seconds, 2),
                       "boundary_offset_mm": offset_mm, "tissue_volume_mm3": round(obs.reconstruction.volume_mm3, 1),
                       "stats": {n: (round(v, 4) if isinstance(v, float) else v) for n, v in stats.items()},
                       "frames": frames, "rms_error_um": np.round(error, 1).tolist(),
+                      "mean_shift_error_um": np.round(shift, 1).tolist(),
+                      "rms_error_without_shift_um": np.round(shape, 1).tolist(),
+                      "rms_error_without_rigid_motion_um": np.round(rigid, 1).tolist(),
+                      "rigid_turn_between_model_and_truth_deg": np.round(angle, 2).tolist(),
                       "truth_rms_displacement_um": np.round(size, 1).tolist(),
                       "model_rms_displacement_um": np.round(size_model, 1).tolist()}))
 
