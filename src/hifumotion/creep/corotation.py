@@ -22,6 +22,8 @@ stretches are not (docs/decisions.md, issue 41, part 3).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit, prange
 
@@ -119,6 +121,16 @@ def _rotated_rates(velocity, elements, blocks, block_of, rot, out):
         out[e] = np.sqrt(2.0 * dd)
 
 
+@dataclass(frozen=True)
+class Rotated:
+    """The elastic force linearised with the voxels' rotations ``rotations`` (voxels, 3, 3):
+    ``f(u) = K_R u + loads`` (CSR data of K_R on the mesh's pattern, N/m; loads (n, 3), N)."""
+
+    rotations: np.ndarray
+    stiffness_data: np.ndarray
+    loads: np.ndarray
+
+
 class Corotation:
     """The rotated element matrices of a :class:`~.hexahedra.MeshMatrices` (module docstring).
 
@@ -160,8 +172,9 @@ class Corotation:
         """CSR data (on the mesh's pattern) of ``Σ_e R_e K_e R_eᵀ`` (N/m)."""
         return self._assembled(self.stiffness, np.ones(len(rot)), rot)
 
-    def viscous_data(self, mu_pa_s: np.ndarray, rot: np.ndarray) -> np.ndarray:
-        """CSR data of ``Σ_e μ_e R_e C_e R_eᵀ`` (N·s/m)."""
+    def viscous_data(self, mu_pa_s: np.ndarray, state: Rotated) -> np.ndarray:
+        """CSR data of ``Σ_e μ_e R_e C_e R_eᵀ`` (N·s/m), R_e ``state``'s rotations."""
+        rot = state.rotations
         return self._assembled(self.viscous, np.broadcast_to(np.asarray(mu_pa_s, float), (len(rot),)), rot)
 
     def loads(self, rot: np.ndarray) -> np.ndarray:
@@ -180,12 +193,26 @@ class Corotation:
         k = sp.csr_matrix((self.stiffness_data(rot), asm.indices, asm.indptr), shape=(asm.size, asm.size))
         return (k @ np.asarray(u_m, float).ravel()).reshape(-1, 3) + self.loads(rot)
 
-    def rates(self, velocity_m_s: np.ndarray, rot: np.ndarray) -> np.ndarray:
-        """Equivalent shear rate (1/s) of every voxel, its velocity read in its own frame."""
+    def linearised(self, u_m: np.ndarray, rot: np.ndarray | None = None) -> Rotated:
+        """The force's K_R and loads with the rotations at ``u_m`` (or ``rot``, taken there)."""
+        rot = self.rotations(u_m) if rot is None else rot
+        return Rotated(rot, self.stiffness_data(rot), self.loads(rot))
+
+    def moved(self, state: Rotated, u_m: np.ndarray, tolerance_m: float) -> Rotated | None:
+        """The rotations at ``u_m`` if a voxel's differs from ``state``'s by more than ``tolerance_m``
+        over the voxel's side (radians: its corners then move less than ``tolerance_m``), else None."""
+        rot = self.rotations(u_m)
+        if np.abs(rot - state.rotations).max() <= tolerance_m / self.matrices.cube.side_m:
+            return None
+        return self.linearised(u_m, rot)
+
+    def rates(self, velocity_m_s: np.ndarray, u_m: np.ndarray) -> np.ndarray:
+        """Equivalent shear rate (1/s) of every voxel, its velocity read in its own frame at ``u_m``."""
+        rot = self.rotations(u_m)
         out = np.empty(len(rot))
         _rotated_rates(np.ascontiguousarray(velocity_m_s, float), self.matrices.elements, self.centre_b,
                        self.block_of, rot, out)
         return out
 
 
-__all__ = ["Corotation"]
+__all__ = ["Corotation", "Rotated"]

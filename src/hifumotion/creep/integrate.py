@@ -46,6 +46,7 @@ import scipy.sparse as sp
 
 from hifumotion.creep.contact import SLIP, STICK, ContactSet, FrictionLinearised, Plane, Punch, friction_linearised
 from hifumotion.creep.corotation import Corotation
+from hifumotion.creep.neo_hooke import NeoHooke
 from hifumotion.creep.hexahedra import MeshMatrices, _positions
 from hifumotion.creep.linear import Factor, FactorError, preconditioned_cg, refined_solve
 from hifumotion.creep.reduce import reduced_matrix_data
@@ -60,6 +61,15 @@ LEFT_TOLERANCE = 2e-3
 #: Settling steps (s): from a millisecond, where inertia dominates a 1 mm voxel's stiffness,
 #: to static equilibrium (M/Δt² below 10⁻⁸ of K).
 SETTLE_STEPS_S = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 1e3)
+
+
+#: ``CreepSettings.kinematics`` → the elastic force of a large deformation, made from the mesh's
+#: matrices, its rest nodes (m), G and κ (Pa); None for small strain (f = K u).
+LARGE_DEFORMATION = {
+    "small_strain": lambda matrices, rest_m, shear_pa, bulk_pa: None,
+    "corotational": lambda matrices, rest_m, shear_pa, bulk_pa: Corotation(matrices, rest_m, 2 * shear_pa, bulk_pa),
+    "neo_hooke": lambda matrices, rest_m, shear_pa, bulk_pa: NeoHooke(matrices, rest_m, shear_pa, bulk_pa),
+}
 
 
 @dataclass(frozen=True)
@@ -135,10 +145,10 @@ class CreepSolver:
             raise InputError(str(exc), "tissue mesh") from None
         self.assembly = self.matrices.assembly
         self.k_data = self.matrices.matrix(2 * g, lam + 2 * g / 3, 0.0).data
-        # corotational kinematics: each step's K and C turned with the voxels (.corotation)
-        self.corotation = (Corotation(self.matrices, self.rest_m, 2 * g, lam + 2 * g / 3)
-                           if self.settings.kinematics == "corotational" else None)
-        self._rotated: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # (R_e, K_R data, loads)
+        # large deformations: the elastic force linearised per step and round (.corotation: the
+        # voxels' rotations taken out; .neo_hooke: finite strain); None: small strain, f = K u
+        self.large = LARGE_DEFORMATION[self.settings.kinematics](self.matrices, self.rest_m, g, lam + 2 * g / 3)
+        self._linearised = None   # the step's linearisation: its stiffness_data and loads
         rows = np.repeat(np.arange(self.assembly.size), np.diff(self.assembly.indptr))
         # a spring of 10⁻¹⁰ of the mean stiffness ties every node to its rest place: a body on
         # frictionless contacts keeps a well-posed system when Δt is long (M/Δt² → 0); it moves
@@ -173,52 +183,45 @@ class CreepSolver:
         self._factor: Factor | None = None
         self._reduction_key = None
         self.stats = {"steps": 0, "rejected": 0, "factorisations": 0, "solves": 0, "cg_iterations": 0,
-                      "rounds": 0, "polish_rounds": 0, "friction_rounds": 0, "rotation_rounds": 0,
+                      "rounds": 0, "polish_rounds": 0, "friction_rounds": 0, "linearisation_rounds": 0,
                       "max_penetration_mm": 0.0}
 
     # -- the linear system ------------------------------------------------------------
     def _matrices(self, dt: float, mu: np.ndarray | None) -> tuple[sp.csr_matrix, sp.csr_matrix | None]:
         """``A = K + C/Δt + M/Δt²`` and ``C/Δt`` (None without viscosity), on one CSR pattern."""
         asm = self.assembly
-        rotated = self._rotated
-        data = (self.k_data if rotated is None else rotated[1]).copy()
+        lin = self._linearised
+        data = (self.k_data if lin is None else lin.stiffness_data).copy()
         c = None
         if mu is not None and self.material.beta1 > 0:
-            if rotated is None:
-                c = self.matrices.matrix(0.0, 0.0, mu / dt)
-            else:
-                c = sp.csr_matrix((self.corotation.viscous_data(mu / dt, rotated[0]), asm.indices, asm.indptr),
-                                  shape=(asm.size, asm.size))
+            turned = None if lin is None else self.large.viscous_data(mu / dt, lin)
+            c = (self.matrices.matrix(0.0, 0.0, mu / dt) if turned is None else
+                 sp.csr_matrix((turned, asm.indices, asm.indptr), shape=(asm.size, asm.size)))
             data += c.data
         data[self.diag_index] += np.repeat(self.mass, 3) / dt ** 2 + self.anchor_stiffness
         return sp.csr_matrix((data, asm.indices, asm.indptr), shape=(asm.size, asm.size)), c
 
     def _step_system(self, u: np.ndarray, v: np.ndarray, dt: float, mu: np.ndarray | None
                      ) -> tuple[sp.csr_matrix, np.ndarray]:
-        """The step's ``A`` and right-hand side (module docstring; with the corotational loads)."""
+        """The step's ``A`` and right-hand side (module docstring; with a large deformation's loads)."""
         a, c = self._matrices(dt, mu)
         base = self.body_force.ravel() + np.repeat(self.mass, 3) / dt ** 2 * (u + dt * v).ravel()
-        if self._rotated is not None:
-            base -= self._rotated[2]
+        if self._linearised is not None:
+            base -= self._linearised.loads.ravel()
         if c is not None:
             base += c @ u.ravel()
         return a, base
 
-    def _rotate(self, u: np.ndarray, rot: np.ndarray | None = None) -> None:
-        """Take the voxels' rotations at ``u`` (m; or ``rot``, made there) for the step's K_R and loads."""
-        rot = self.corotation.rotations(u) if rot is None else rot
-        self._rotated = (rot, self.corotation.stiffness_data(rot), self.corotation.loads(rot).ravel())
-
-    def _rotations_moved(self, u: np.ndarray) -> bool:
-        """Corotational: whether a voxel's rotation at ``u`` differs from the one the round took by
-        more than a tenth of the step's tolerance (radians: a voxel's corners then move less than
-        that many spacings); if so they are taken."""
-        if self.corotation is None:
+    def _linearisation_moved(self, u: np.ndarray) -> bool:
+        """A large deformation: whether the solution ``u`` moved from where the rounds linearised the
+        elastic force by more than a tenth of the step's tolerance (its nodes, or a voxel's corners
+        by its rotation); if so it is linearised again there."""
+        if self.large is None:
             return False
-        rot = self.corotation.rotations(u)
-        if np.abs(rot - self._rotated[0]).max() <= 0.1 * self.settings.tolerance:
+        again = self.large.moved(self._linearised, u, 0.1 * self.settings.tolerance * self.dx_m)
+        if again is None:
             return False
-        self._rotate(u, rot)
+        self._linearised = again
         return True
 
     def _reduction(self):
@@ -495,10 +498,10 @@ class CreepSolver:
             # solve (as the twin's truth, reference.creep_fe.follow); held with zero force it
             # would leave its advance to contacts whose reactions must sum to nothing (chatter)
             self.contacts.release(self.contacts.on_bar())
-        if self.corotation is not None:
-            # the voxels' rotations at the step's predictor; the rounds turn them on to the
-            # solution's (.corotation): the elastic force is then K_R u + loads
-            self._rotate(u + dt * v)
+        if self.large is not None:
+            # the elastic force linearised at the step's predictor; the rounds take it on to the
+            # solution's (.corotation, .neo_hooke): K_lin u + loads
+            self._linearised = self.large.linearised(u + dt * v)
         a, base = self._step_system(u, v, dt, mu)
         self._engage_punch(u, force)
         guess = (u + dt * v).ravel()
@@ -518,10 +521,10 @@ class CreepSolver:
                 self._engage_punch(unew, force)
                 changed = True
             guess = new
-            if not changed and self._rotations_moved(unew):
-                # the voxels turned on from the rotations this round took: their K_R again
+            if not changed and self._linearisation_moved(unew):
+                # the solution moved on from where the elastic force was linearised: again there
                 a, base = self._step_system(u, v, dt, mu)
-                self.stats["rotation_rounds"] += 1
+                self.stats["linearisation_rounds"] += 1
                 continue
             if not changed and self._friction_settled(friction, unew):
                 # the round's system solved to full accuracy: a soft mode (a body held by a few
@@ -616,8 +619,7 @@ class CreepSolver:
             self.stats["steps"] += 1
             t += dt
             u, v = unew, vnew
-            rate = (self.matrices.rates(v) if self.corotation is None
-                    else self.corotation.rates(v, self.corotation.rotations(u)))
+            rate = self.matrices.rates(v) if self.large is None else self.large.rates(v, u)
             saved_t.append(t)
             saved_u.append(u.copy())
             saved_adv.append(self.advance_m)

@@ -194,9 +194,9 @@ class ReducedCreep:
     """
 
     def __init__(self, solver, basis: ReducedBasis, settings: ReducedSettings | None = None):
-        if solver.corotation is not None:
-            raise InputError("the reduced model is small-strain: kinematics = corotational needs the implicit "
-                             "integrator", "kinematics")
+        if solver.large is not None:
+            raise InputError(f"the reduced model is small-strain: kinematics = {solver.settings.kinematics} needs "
+                             "the implicit integrator", "kinematics")
         self.settings = settings or ReducedSettings()
         basis = self.basis = held_on_solids(basis, solver, self.settings.kept_on_solid * solver.dx_m)
         self.mesh = solver.mesh

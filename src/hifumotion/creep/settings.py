@@ -62,7 +62,9 @@ class CreepSettings:
     kinematics
         ``"small_strain"``: ``f = K u`` (a turned voxel is stressed); ``"corotational"``: each
         voxel's rotation taken out of its strain (:mod:`.corotation`), so that a sample may
-        turn and slide far with no stress the turn made. The reduced model is small-strain.
+        turn and slide far with no stress the turn made; ``"neo_hooke"``: finite strain, the
+        truth's nearly incompressible neo-Hooke (:mod:`.neo_hooke`). All three agree at small
+        strain. The reduced model is small-strain.
     """
 
     tolerance: Positive = 0.005
@@ -79,7 +81,7 @@ class CreepSettings:
     newton_rounds: Annotated[int, Ge(0)] = 8
     solver: Literal["pardiso", "superlu"] | None = None
     precision: Literal["mixed", "double"] = "mixed"
-    kinematics: Literal["small_strain", "corotational"] = "small_strain"
+    kinematics: Literal["small_strain", "corotational", "neo_hooke"] = "small_strain"
 
 
 @dataclass
