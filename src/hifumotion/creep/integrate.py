@@ -11,8 +11,10 @@ is taken by **backward Euler** with the displacement at the end of the step unkn
 
 ``K`` the small-strain elasticity and ``C`` the Kelvin–Voigt viscosity of
 :mod:`.hexahedra` (μ per voxel from the previous step's shear rate, Eq. 16: one Picard
-step, as the explicit path's implicit viscosity), ``M`` the lumped real mass (no mass
-scaling: it only keeps a frictionless body's rigid modes well posed). Contacts are
+step, as the explicit path's implicit viscosity) — or, with ``CreepSettings.kinematics``, the
+elastic force of a large deformation linearised, ``K_lin u + loads`` (:mod:`.corotation`,
+:mod:`.neo_hooke`), re-linearised by the step's rounds while the solution moves; ``M`` the
+lumped real mass (no mass scaling: it only keeps a frictionless body's rigid modes well posed). Contacts are
 constraints (:mod:`.contact`), eliminated from the system: each step solves the
 symmetric positive-definite reduced system once per round. A round also linearises the
 friction (Coulomb's with an elastic stick, :mod:`.contact`) at the last round's motion —
@@ -67,7 +69,8 @@ SETTLE_STEPS_S = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 1e3)
 #: matrices, its rest nodes (m), G and κ (Pa); None for small strain (f = K u).
 LARGE_DEFORMATION = {
     "small_strain": lambda matrices, rest_m, shear_pa, bulk_pa: None,
-    "corotational": lambda matrices, rest_m, shear_pa, bulk_pa: Corotation(matrices, rest_m, 2 * shear_pa, bulk_pa),
+    "corotational": lambda matrices, rest_m, shear_pa, bulk_pa: Corotation(matrices, rest_m, 2 * shear_pa,
+                                                                           bulk_pa),
     "neo_hooke": lambda matrices, rest_m, shear_pa, bulk_pa: NeoHooke(matrices, rest_m, shear_pa, bulk_pa),
 }
 

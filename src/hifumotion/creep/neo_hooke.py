@@ -15,13 +15,15 @@ the small-strain ``2G·dev + κ·vol`` — today's model is its limit. The first
 stress and its tangent ``A = ∂P/∂F`` are
 
     P = μ J^(−2/3) (F − I₁/3 F⁻ᵀ) + κ (J − 1) J F⁻ᵀ,
-    A_iJkL = μ J^(−2/3) [δ_ik δ_JL − ⅔ F_iJ F⁻¹_Lk − ⅔ F⁻¹_Ji F_kL + ²⁄₉ I₁ F⁻¹_Ji F⁻¹_Lk + ⅓ I₁ F⁻¹_Li F⁻¹_Jk]
+    A_iJkL = μ J^(−2/3) [δ_ik δ_JL − ⅔ F_iJ F⁻¹_Lk − ⅔ F⁻¹_Ji F_kL
+                          + ²⁄₉ I₁ F⁻¹_Ji F⁻¹_Lk + ⅓ I₁ F⁻¹_Li F⁻¹_Jk]
              + κ (2J − 1) J F⁻¹_Ji F⁻¹_Lk − κ (J − 1) J F⁻¹_Jk F⁻¹_Li,
 
 each voxel's 24 × 24 tangent made positive semi-definite where it is not by clamping its
 negative eigenvalues at zero — projected Newton (Teran, Sifakis, Irving & Fedkiw, SCA 2005):
 under compression the initial stress can make it indefinite, and the step's factorisation needs
-a positive system; the forces stay exact, so a converged step is the exact one. The step (:mod:`.integrate`) takes the elastic force as its linearisation at a point u*,
+a positive system; the forces stay exact, so a converged step is the exact one. The step
+(:mod:`.integrate`) takes the elastic force as its linearisation at a point u*,
 ``f(u) ≈ K_T(u*) u + (f(u*) − K_T(u*) u*)``: a tangent stiffness and a load, re-linearised by
 the rounds while the solution moves from u* (Newton's iteration inside the step, beside the
 contacts' and the friction's). Eq. 16's viscosity stays the small-strain Kelvin–Voigt term on
