@@ -531,11 +531,14 @@ def test_contour_residuals_are_weighted_by_the_tracking_quality_at_each_point():
 
 
 @pytest.mark.slow
-def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path):
+@pytest.mark.parametrize("final_particles", [300, 150])
+def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path, final_particles):
     """``hifumotion predict CAL/`` must predict with the calibrated model itself: the same
     conforming voxel mesh, so the same motion as the calibration held in memory. The search
     runs on the search model's reduced model (its snapshots on the cluster), and a setting of
-    the fast path given in the run's configuration reaches the model that was fitted and saved."""
+    the fast path given in the run's configuration reaches the model that was fitted and saved.
+    With the final model at the search model's resolution (the calibration in seconds), the
+    search model is the one saved."""
     from hifumotion.estimation.store import load_calibration
     from hifumotion.metrics import dice
     from hifumotion.observed import load_observed
@@ -548,9 +551,11 @@ def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path
     train, valid = default_frames(len(observed.frames))
     settings = validate_config(EstimationConfig, {
         "search_particles": 150, "max_evaluations": 1, "workers": 1, "search_integrator": "reduced",
-        "model": {"tissue_particles": 300, "creep": {"stick_mm": 0.02}}})
+        "model": {"tissue_particles": final_particles, "creep": {"stick_mm": 0.02}}})
     observation, cal = observe_and_calibrate(observed, tmp_path / "cal", settings, train)
     spec, k, reference, _ = load_calibration(tmp_path / "cal")
+    assert len(spec.tissue_mm) == len(cal.spec.tissue_mm)
+    assert (len(cal.spec.tissue_mm) == len(cal.search_spec.tissue_mm)) == (final_particles == 150)
     assert cal.spec.settings.creep.stick_mm == spec.settings.creep.stick_mm == 0.02
     assert cal.search_spec.settings.integrator == "reduced" and cal.search_spec.settings.creep.stick_mm == 0.02
     # the reduced search: the search model's around the design's centre and its best start, then
