@@ -14,7 +14,8 @@ voxel's deformation in its own rotated frame:
 voxel's centre. A rigid motion ``x = Q X + c`` gives ``R = Q`` and no force; ``R = I`` gives
 back ``K u``. Expanded, ``f_e = R_e K_e R_eᵀ u_e + R_e K_e (R_eᵀ − I) X_e``: a rotated
 stiffness and a load, which is how the backward-Euler step takes it (:mod:`.integrate`), the
-rotations lagged from the step's predictor as Eq. 16's μ is lagged (one Picard step). The
+rotations taken at the step's predictor and again by its rounds while the solution turns on
+(a Picard iteration inside the step, :meth:`Corotation.moved`). The
 viscosity's matrix turns with its voxel too, and its shear rate is read in the voxel's frame.
 The material law stays linear in the rotated frame: large rotations are exact, large
 stretches are not (docs/decisions.md, issue 41, part 3).
