@@ -28,18 +28,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from hifumotion.creep.hexahedra import deformation_gradient
+
 
 @njit(cache=True, parallel=True)
 def _rotations(u, elements, grads, grad_of, out):
     for e in prange(elements.shape[0]):
-        g = grads[grad_of[e]]
-        f = np.eye(3)
-        for a in range(8):
-            n = elements[e, a]
-            for i in range(3):
-                ui = u[n, i]
-                for j in range(3):
-                    f[i, j] += ui * g[a, j]
+        f = np.empty((3, 3))
+        deformation_gradient(u, elements[e], grads[grad_of[e]], f)
         w, _, vt = np.linalg.svd(f)
         r = w @ vt
         if np.linalg.det(r) < 0.0:   # an inverted voxel: the nearest proper rotation

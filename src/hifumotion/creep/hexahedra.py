@@ -159,7 +159,23 @@ def _positions(indptr, indices, rows, cols):
     return out
 
 
-__all__ = ["CubeMatrices", "cube_matrices", "strain_matrix", "Assembly"]
+__all__ = ["CubeMatrices", "cube_matrices", "strain_matrix", "Assembly", "deformation_gradient"]
+
+
+@njit(cache=True)
+def deformation_gradient(u, nodes, g, f):
+    """Fill ``f`` (3 × 3) with F = I + Σ_a u_a ⊗ ∇N_a of the voxel whose corners are ``nodes`` (8),
+    ``g`` (8 × 3, 1/m) the reference gradients ∇N_a at the point and ``u`` (n, 3) the node
+    displacements (m)."""
+    for i in range(3):
+        for j in range(3):
+            f[i, j] = 1.0 if i == j else 0.0
+    for a in range(8):
+        n = nodes[a]
+        for i in range(3):
+            ui = u[n, i]
+            for j in range(3):
+                f[i, j] += ui * g[a, j]
 
 
 @njit(cache=True)

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from hifumotion.creep.hexahedra import _XI, _b_at, strain_matrix
+from hifumotion.creep.hexahedra import _XI, _b_at, deformation_gradient, strain_matrix
 
 
 @njit(cache=True, parallel=True)
@@ -56,14 +56,7 @@ def _element_tangents(u, elements, grads, weights, block_of, mu, kappa, project,
         for p in range(9):
             g = grads[blk, p]
             w = weights[blk, p]
-            for i in range(3):
-                for j in range(3):
-                    f[i, j] = 1.0 if i == j else 0.0
-            for a in range(8):
-                n = elements[e, a]
-                for i in range(3):
-                    for j in range(3):
-                        f[i, j] += u[n, i] * g[a, j]
+            deformation_gradient(u, elements[e], g, f)
             jac = np.linalg.det(f)
             if jac <= 0.0:
                 jac = 1e-12   # an inverted point: kept finite, the step controller rejects the step
