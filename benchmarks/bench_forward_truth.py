@@ -11,7 +11,7 @@ frames it fits without absorbing the error into wrong parameters.
 Prints JSON: the run's time and solver counts, and every ``--every`` frames the RMS
 displacement error (and its split: the points' common shift, the RMS left without it, and the
 RMS left without the best rigid motion of the model's points onto the truth's: the shape's own
-error) and the truth's and the model's RMS displacements (µm). Run it alone (2 cores)::
+error), the rotation vector of that motion and each one's own since frame 0 (degrees), and the truth's and the model's RMS displacements (µm). Run it alone (2 cores)::
 
     python benchmarks/bench_forward_truth.py .bench/twins/push_release_s43-*/ --last 190
     python benchmarks/bench_forward_truth.py TWIN --set '{"stick_mm": 0.01}'   # CreepSettings fields
@@ -31,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def main() -> None:
+    from _rigid_split import split_difference
     from bench_estimation import observe
 
     from hifumotion.creep import integrate
@@ -88,7 +89,7 @@ def main() -> None:
                    p.get("friction"))
     spec = model_spec(obs, ModelSettings(tissue_particles=args.particles))
     t0 = time.perf_counter()
-    model = run_model(spec, k, args.last)
+    model = run_model(spec, k, args.last, keep_frames=range(0, args.last + 1, args.every))
     seconds = time.perf_counter() - t0
 
     truth = np.load(args.twin / "truth" / "tissue_trajectory.npz")
@@ -96,25 +97,23 @@ def main() -> None:
     a0 = model.points_mm[0]
     frames = list(range(0, min(len(model.points_mm), len(positions)), args.every))
     error, size, size_model, shift, shape, rigid, angle = [], [], [], [], [], [], []
+    own_turn_model, own_turn_truth, axes, body_turn = [], [], [], []
     follow, _ = material_weights(a0, positions[0], dx)   # the truth's material points A
     for f in frames:
         u_true = follow @ (positions[f] - positions[0])
         u_model = model.points_mm[f] - a0
-        error.append(float(np.sqrt(((u_model - u_true) ** 2).sum(1).mean()) * 1000))
-        # the error split: a common shift of the points (the sample slid too far or too little)
-        # and what is left (its shape deformed otherwise)
-        mean = (u_model - u_true).mean(axis=0)
-        shift.append(float(np.linalg.norm(mean)) * 1000)
-        shape.append(float(np.sqrt(((u_model - u_true - mean) ** 2).sum(1).mean()) * 1000))
-        # and without the best rigid motion of the model's points onto the truth's (Kabsch): the
-        # error of the section's shape alone, whatever it slid and turned by
-        pm, pt = a0 + u_model, a0 + u_true
-        cm, ct = pm.mean(axis=0), pt.mean(axis=0)
-        w, _, vt = np.linalg.svd((pm - cm).T @ (pt - ct))
-        d = np.sign(np.linalg.det(w @ vt))
-        turn = (w @ np.diag([1.0, 1.0, d]) @ vt).T
-        rigid.append(float(np.sqrt((((pm - cm) @ turn.T + ct - pt) ** 2).sum(1).mean()) * 1000))
-        angle.append(float(np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1.0, 1.0)))))
+        split = split_difference(a0 + u_model, a0 + u_true)
+        error.append(split["rms_um"])
+        shift.append(split["shift_um"])
+        shape.append(split["without_shift_um"])
+        rigid.append(split["without_rigid_motion_um"])
+        angle.append(split["turn_deg"])
+        axes.append(np.round(split["turn_vector_deg"], 2).tolist())
+        # each one's own turn since frame 0 (its rotation vector: which way each turns)
+        own_turn_model.append(np.round(split_difference(a0, a0 + u_model)["turn_vector_deg"], 2).tolist())
+        body_turn.append(np.round(split_difference(model.rest_mm, model.kept[f])["turn_vector_deg"],
+                                  2).tolist() if f in model.kept else None)
+        own_turn_truth.append(np.round(split_difference(a0, a0 + u_true)["turn_vector_deg"], 2).tolist())
         size.append(float(np.sqrt((u_true ** 2).sum(1).mean()) * 1000))
         size_model.append(float(np.sqrt((u_model ** 2).sum(1).mean()) * 1000))
     print(json.dumps({"twin": str(args.twin), "settings": changes, "seconds": round(seconds, 2),
@@ -125,6 +124,10 @@ def main() -> None:
                       "rms_error_without_shift_um": np.round(shape, 1).tolist(),
                       "rms_error_without_rigid_motion_um": np.round(rigid, 1).tolist(),
                       "rigid_turn_between_model_and_truth_deg": np.round(angle, 2).tolist(),
+                      "rigid_turn_vector_deg": axes,
+                      "model_turn_vector_deg": own_turn_model,
+                      "truth_turn_vector_deg": own_turn_truth,
+                      "model_whole_sample_turn_vector_deg": body_turn,
                       "truth_rms_displacement_um": np.round(size, 1).tolist(),
                       "model_rms_displacement_um": np.round(size_model, 1).tolist()}))
 

@@ -5,7 +5,7 @@ Reads a twin folder made with ``truth.solver = "finite_elements"`` (``hifumotion
 the same sample, material, bar and schedule — its particles the truth's lattice, its voxels
 conformed to the sample's surface — and compares the displacement of every lattice point
 frame by frame. Prints JSON: RMS and largest difference over the truth's largest
-displacement, the bar's advance in both, and the wall times.
+displacement, the whole sample's turn in each (rotation vectors since frame 0, degrees), the bar's advance in both, and the wall times.
 
     .venv/bin/python benchmarks/bench_twin_truth.py twin/ [--frames 0,50,100,199]
 """
@@ -14,16 +14,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("twin", type=Path)
     args = ap.parse_args()
+    from _rigid_split import split_difference
+
     from hifumotion.creep.scene import simulate_creep
     from hifumotion.experiment.blob import Blob
     from hifumotion.experiment.config import TwinConfig, apply_protocol
@@ -62,7 +67,12 @@ def main() -> None:
         "truth_wall_s": params["facts"].get("fe_wall_s"), "fast_path_wall_s": fast_s,
         "frames": {str(k): {"truth_peak_mm": float(peak[k]),
                             "rms_over_peak": float(np.sqrt((diff[k] ** 2).mean()) / max(peak[k], 1e-12)),
-                            "max_over_peak": float(diff[k].max() / max(peak[k], 1e-12))}
+                            "max_over_peak": float(diff[k].max() / max(peak[k], 1e-12)),
+                            # the whole sample's turn since frame 0 (rotation vectors, degrees)
+                            "truth_turn_vector_deg": np.round(split_difference(
+                                lattice, lattice + u_fe[k])["turn_vector_deg"], 3).tolist(),
+                            "fast_turn_vector_deg": np.round(split_difference(
+                                lattice, lattice + u_fast[k])["turn_vector_deg"], 3).tolist()}
                    for k in sorted({n // 4, n // 2, last})},
         "truth_mean_descent_mm": float(-u_fe[last, :, 1].mean()),
         "fast_mean_descent_mm": float(-u_fast[last, :, 1].mean()),
