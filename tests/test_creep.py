@@ -568,6 +568,44 @@ def test_the_reduced_model_sticks_below_coulombs_limit_and_slides_at_its_rate_ab
                 assert r.stats["friction_rounds"] > 0
 
 
+def test_the_reduced_model_run_at_another_friction_sticks_and_slides_by_coulombs_law_at_that_friction():
+    # the rough-floor block's modes made at μ 0.5 (runs that stick and slide), run at μ 0.25 and
+    # 1.0 (the fitted friction of a driven slide reaches the reduced model this way): a push of
+    # 0.375 M g slides it at μ 0.25 as the analytic rigid block at μ 0.25 does, and holds it at
+    # μ 1.0 and at the μ it was made at, within the elastic stick's swing
+    n, rho, g, e, made = 3, 1000.0, 9.81, 1e6, 0.5
+    side = n * MM
+    mass = rho * side ** 3
+    mesh = voxel_mesh(block(n), 1.0)
+    eps_mm = CreepSettings().stick_mm
+    material = CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho)
+    times = np.array([0.0, 0.005, 0.01, 0.015, 0.02])
+
+    def solver_at(force):
+        punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), made)], punch,
+                           CreepSettings(tolerance=1e-4))
+
+    snapshots = [solver_at(r * made * mass * g).run(times) for r in (0.5, 2.0)]
+    reduced = _reduced_of(solver_at(0.0), snapshots, tolerance=1e-4)
+    force = 0.375 * mass * g
+    bottom = mesh.nodes_mm[:, 1] < 1e-9
+    for mu in (0.25, 1.0, None):
+        r = reduced.run(material, lambda t: force if t > 0 else 0.0, (), times, friction=mu)
+        slid_mm = np.abs(r.nodes_mm[-1][bottom, 0] - r.nodes_mm[0][bottom, 0]).max()
+        if mu == 0.25:
+            expected = _rigid_block_on_elastic_stick(times, force / mass, mu, g, eps_mm * MM) / MM
+            np.testing.assert_allclose(r.advance_mm[1:], expected[1:], rtol=0.03)
+        else:
+            # 0.375 M g is below μ M g at 0.5 (the made μ, None) and at 1.0: it sticks, its
+            # elastic stick swinging at most twice F ε / μ M g
+            swing = 2 * force / ((mu or made) * mass * g) * eps_mm
+            assert slid_mm <= 1.05 * swing
+            assert np.abs(r.advance_mm).max() <= 1.05 * swing
+    with pytest.raises(InputError, match="friction"):
+        reduced.run(material, lambda t: force, (), times, friction=-0.1)
+
+
 @pytest.mark.parametrize("scale", [0.7, 1.4])
 def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snapshots_never_had(scale):
     # an ellipsoid pushed onto a rough floor: its curved bottom lands on the floor as it is

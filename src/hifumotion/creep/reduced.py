@@ -381,13 +381,26 @@ class ReducedCreep:
         c.T[self._upper] = c[self._upper]
         return mu, c
 
-    def loads(self, material: CreepMaterial) -> "ReducedLoads":
-        """The material's reduced stiffness and its loads at q = 0 (the weight, less u₀'s elastic force)."""
+    def loads(self, material: CreepMaterial, friction: float | None = None) -> "ReducedLoads":
+        """The material's reduced stiffness and its loads at q = 0 (the weight, less u₀'s elastic
+        force); ``friction``: Coulomb's μ_f of the solids for this run (None: the one the model was
+        made at — its snapshot runs' should span the μ_f it is run at)."""
         lam, g = material.lame()
         kappa = lam + 2 * g / 3
+        scale = 1.0
+        if friction is not None and self.friction is not None:     # (settings.friction off: none at all)
+            if not (np.isfinite(friction) and friction >= 0):
+                raise InputError(f"expected Coulomb's friction μ_f ≥ 0, got {friction}", "friction")
+            made = self.friction.made_coefficient
+            if made > 0:
+                scale = friction / made
+            elif friction > 0:
+                # no candidates: the solids it was made with were frictionless
+                raise InputError(f"the reduced model was made without friction; it cannot run at μ_f = {friction}",
+                                 "friction")
         return ReducedLoads(material, 2 * g * self.deviatoric + kappa * self.volumetric + self.anchor,
                             self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric,
-                            2 * g, kappa)
+                            2 * g, kappa, scale)
 
     def settle(self, loads: "ReducedLoads", force_n: float, stats: dict | None = None) -> "ReducedState":
         """Frame 0: static equilibrium under the weight and the bar's ``force_n`` (N) in this
@@ -395,7 +408,7 @@ class ReducedCreep:
         stats = step_counters(self) if stats is None else stats
         r = self.basis.size
         q = self._solve(loads.stiffness, loads.load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
-        return self.lag_viscosity(ReducedState(0.0, q, np.zeros(r), np.zeros((r, r)), None), loads)
+        return self.lag_viscosity(ReducedState(0.0, q, np.zeros(r), np.zeros((r, r)), None), loads, force_n)
 
     def step(self, state: "ReducedState", loads: "ReducedLoads", dt: float, force_n: float,
              stats: dict | None = None, error: bool = True, advance_m: float | None = None
@@ -439,14 +452,19 @@ class ReducedCreep:
             stats["bar_force_n"] = spring * (target - float(self.basis.advance_modes_m @ qnew))
         return ReducedState(state.t_s + dt, qnew, qdot_new, visc, friction), err
 
-    def lag_viscosity(self, state: "ReducedState", loads: "ReducedLoads") -> "ReducedState":
+    def lag_viscosity(self, state: "ReducedState", loads: "ReducedLoads", bar_force_n: float | None = None
+                      ) -> "ReducedState":
         """``state`` with what the next step takes from it (lagged, as the full model's): Eq. 16's
-        μ from its own rates, and the friction's normal reactions and slid anchors."""
+        μ from its own rates, and the friction's normal reactions and slid anchors. With the
+        bar's push ``bar_force_n`` (N) and ``settings.friction_balance``, the floor's and the face's
+        reactions carry the sample's balance in all (:meth:`~.reduced_friction.ReducedFriction.balanced`)."""
         mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot)
         friction = state.friction
         if self.friction is not None:
             reactions = self.friction.normal_reactions_n(loads.two_g_pa, loads.kappa_pa, state.q, state.qdot, mu)
-            friction = self.friction.state(state.q, reactions, state.friction)
+            if bar_force_n is not None and self.settings.friction_balance:
+                reactions = self.friction.balanced(reactions, self.friction.gaps_m(state.q), bar_force_n)
+            friction = self.friction.state(state.q, reactions, state.friction, scale=loads.friction_scale)
         return ReducedState(state.t_s, state.q, state.qdot, visc, friction)
 
     def particles_mm(self, qs: np.ndarray) -> np.ndarray:
@@ -456,7 +474,8 @@ class ReducedCreep:
 
     def run(self, material: CreepMaterial, force_n: Callable[[float], float], breakpoints_s: Sequence[float],
             output_times_s: np.ndarray, progress: Callable[[float], None] | None = None,
-            nodes: bool = True, travel_m: Callable[[float], float] | None = None) -> CreepResult:
+            nodes: bool = True, travel_m: Callable[[float], float] | None = None,
+            friction: float | None = None) -> CreepResult:
         """Push from the settled state: ``force_n(t)`` (N) on the bar; frames at ``output_times_s``.
 
         ``travel_m(t)`` (travel control, m): the bar driven that far along its axis beyond
@@ -464,6 +483,8 @@ class ReducedCreep:
         force it takes is a result). Returns the full model's :class:`~.integrate.CreepResult`
         (nodes, particles, the bar's advance and force at every frame); ``nodes=False`` leaves
         the nodes out (none of the particles' consumers needs them; they cost as much again).
+        ``friction``: Coulomb's μ_f of the floor, walls and bar's face (None: the one the model was
+        made at; :meth:`loads`).
         """
         started = time.perf_counter()
         times = np.asarray(output_times_s, float)
@@ -472,7 +493,7 @@ class ReducedCreep:
         st = self.settings
         b = self.basis
         r = b.size
-        loads = self.loads(material)
+        loads = self.loads(material, friction)
         f0 = 0.0 if travel_m is not None else float(force_n(0.0))
         stats = step_counters(self)
         self._pressed = np.zeros(0, np.int64)   # a run does not depend on the one before
@@ -504,7 +525,7 @@ class ReducedCreep:
                 calm = 0
                 continue
             stats["steps"] += 1
-            state = self.lag_viscosity(new, loads)
+            state = self.lag_viscosity(new, loads, force)
             saved_t.append(state.t_s)
             saved_q.append(state.q.copy())
             saved_f.append(force)
@@ -543,13 +564,14 @@ def driven_bar(a: np.ndarray, advance_modes_m: np.ndarray) -> float:
 @dataclass(frozen=True)
 class ReducedLoads:
     """A material's reduced stiffness (N/m per unit q²) and its loads at q = 0 (N per unit q);
-    its 2G and κ (Pa)."""
+    its 2G and κ (Pa); the run's μ_f over the one the model was made at."""
 
     material: CreepMaterial
     stiffness: np.ndarray
     load: np.ndarray
     two_g_pa: float
     kappa_pa: float
+    friction_scale: float = 1.0
 
 
 @dataclass(frozen=True)

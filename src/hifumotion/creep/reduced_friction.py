@@ -104,6 +104,9 @@ class ReducedFriction:
         self.gap0_m = np.concatenate(gap0) if gap0 else np.zeros(0)
         self.gap_modes = np.vstack(gap_modes) if gap_modes else np.zeros((0, r))
         self.coefficient = contacts.friction[self.body] if len(self.body) else np.zeros(0)
+        # the model's solids share the scene's one μ_f (floor, walls, the bar's face): a run at
+        # another μ_f scales every limit by μ_f / made_coefficient (:meth:`state`)
+        self.made_coefficient = float(self.coefficient.max()) if len(self.coefficient) else 0.0
         self.stick_m, self.touch_m = stick_m, touch_m
         frames = contacts.body_frames[self.body] if len(self.body) else np.zeros((0, 3, 3))
         normals = frames[:, 0]
@@ -122,6 +125,16 @@ class ReducedFriction:
             self.elastic_modes.append(np.asarray(rows @ v))
             self.elastic_settled.append(rows @ displaced)
         self.weight_n = np.einsum("nk,nk->n", normals, solver.body_force[self.nodes])
+        # what the floor and the bar's face carry in all (the balance of the whole sample, which
+        # the candidates' own rows do not keep: Galerkin's equations hold on the modes, not node
+        # by node, and no mode moves the sample into the floor): the net weight (N, its buoyancy
+        # less) and the bar's axis
+        self.net_weight_n = solver.body_force.sum(axis=0)
+        self.floor = np.array([k for k, plane in enumerate(contacts.planes)
+                               if not plane.bonded and contacts.body_frames[k, 0, 1] > 0.99], np.int64)
+        self.punch_index = contacts.punch_index if contacts.punch is not None else None
+        self.bar_axis = (np.asarray(contacts.punch.axis, float) / np.linalg.norm(contacts.punch.axis)
+                         if contacts.punch is not None else np.zeros(3))
         # the viscous part: the voxels around the candidates, each C_e V_e on its 24 unknowns,
         # and which of their entries are a candidate's normal force
         touching = np.isin(m.elements, self.nodes).any(axis=1)
@@ -168,14 +181,34 @@ class ReducedFriction:
                                minlength=len(lam))
         return lam
 
+    def balanced(self, reactions_n: np.ndarray, gaps_m: np.ndarray, bar_force_n: float) -> np.ndarray:
+        """``reactions_n`` with the floor's and the bar's face's pressing candidates scaled so that
+        each solid carries what the sample's balance gives it: the face the bar's push
+        ``bar_force_n`` (N, along its axis), the floor the net weight and the push's vertical part;
+        each node's share is its own row's (the walls' are left as they are)."""
+        out = np.array(reactions_n, float)
+        pressing = (out > 0) & (gaps_m <= self.touch_m)
+        push = max(float(bar_force_n), 0.0)
+        # the floor's normal is +y: it carries −(net weight + push)_y
+        targets = [(np.isin(self.body, self.floor), -(self.net_weight_n[1] + push * self.bar_axis[1]))]
+        if self.punch_index is not None:
+            targets.append((self.body == self.punch_index, push))
+        for on, total in targets:
+            share = on & pressing
+            carried = float(out[share].sum())
+            if carried > 0.0 and total > 0.0:
+                out[share] *= total / carried
+        return out
+
     def state(self, q: np.ndarray, reactions_n: np.ndarray, previous: FrictionState | None,
-              slide: bool = True) -> FrictionState:
+              slide: bool = True, scale: float = 1.0) -> FrictionState:
         """The friction at ``q`` with the candidates' ``reactions_n``: limits μ_f λ_n of the nodes
         that press, a new contact anchored where it is, one that stops pressing let go; ``slide``
-        (a step's end): an anchor farther than ε dragged to ε."""
+        (a step's end): an anchor farther than ε dragged to ε. ``scale``: this run's μ_f over the
+        one the model was made at (the candidates and their modes do not depend on it)."""
         position = (self._tangent_flat @ q).reshape(-1, 2)                # (m, 2)
         pressing = (reactions_n > 0) & (self.gaps_m(q) <= self.touch_m)
-        limit = np.where(pressing, self.coefficient * reactions_n, 0.0)
+        limit = np.where(pressing, scale * self.coefficient * reactions_n, 0.0)
         if previous is None:
             anchor = position.copy()
         else:

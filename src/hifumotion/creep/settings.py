@@ -106,6 +106,11 @@ class ReducedSettings:
         free (the reduced model before it, kept to measure what friction buys).
     friction_touch
         A friction candidate presses while its gap is below this many spacings.
+    friction_balance
+        The floor's and the bar's face's normal reactions scaled to what the sample's balance
+        gives each (the net weight, the bar's push; :meth:`~.reduced_friction.ReducedFriction.balanced`):
+        the candidates' own rows carried a tenth of it on a stuck slide. Off by default: measured
+        mixed (docs/decisions.md, issue 39, session 33). False takes the rows as they are.
     friction_rounds, friction_rtol
         A step re-linearises the friction at most this many times, until the law holds to
         ``friction_rtol`` of each node's μ_f λ_n.
@@ -123,6 +128,7 @@ class ReducedSettings:
     kept_on_solid: Annotated[float, Ge(0)] = 1e-2
     friction: bool = True
     friction_touch: Positive = 1e-2
+    friction_balance: bool = False
     friction_rounds: Count = 4
     friction_rtol: Fraction = 1e-2
     hyper_reduction: bool = True

@@ -202,7 +202,8 @@ class OnlineAssimilator:
         self.scale = max(float(x[r]), 0.0)    # the bar pushes; it does not pull
         analysed = ReducedState(nominal.t_s, x[:r], nominal.qdot + (x[:r] - nominal.q) / dt, nominal.viscous,
                                  nominal.friction)
-        self.state = self.model.lag_viscosity(analysed, self.loads)
+        self.state = self.model.lag_viscosity(
+            analysed, self.loads, taken if self.travel is not None else self.scale * float(self.schedule(nominal.t_s)))
         self.frame += 1
         predicted = {}
         for k in horizons_frames:
