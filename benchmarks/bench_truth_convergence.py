@@ -75,7 +75,16 @@ def rerun(twin: Path, variant: str, until_s: float | None, penalty: float, slip:
         times = times[times <= until_s + 1e-9]
     problem, lift = fe_problem(cfg, blob, placement)
     started = time.perf_counter()
-    solution = finite_strain_reference(problem, times, settings)
+    told = [-1]
+
+    def progress(fraction: float) -> None:
+        # a line on stderr every tenth of the run (the JSON goes to stdout)
+        tenth = int(10 * fraction)
+        if tenth > told[0]:
+            told[0] = tenth
+            print(f"{variant}: {10 * tenth} % after {time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
+
+    solution = finite_strain_reference(problem, times, settings, progress)
     seconds = time.perf_counter() - started
     positions = lattice[None] + lift + solution.displacement_at(lattice + lift)
     return {"variant": variant, "positions_mm": positions, "seconds": seconds,
