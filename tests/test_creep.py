@@ -522,25 +522,36 @@ def test_the_reduced_model_creeps_by_the_kelvin_voigt_law_under_a_force_its_snap
     assert r.stats["modes"] <= 4
 
 
+def _rough_floor_block(mu: float):
+    """The reduced tests' rough-floor block: a stiff 3-voxel cube (E 1 MPa, 1 mm voxels) on a
+    floor of friction ``mu``, pushed sideways at mid-height by a frictionless bar; returns its
+    mesh, material, mass (kg), g (m/s²), the elastic stick's reach (mm), the output times (s)
+    and ``solver_at(force_n)``, the full model under that push."""
+    n, rho, g = 3, 1000.0, 9.81
+    side = n * MM
+    mesh = voxel_mesh(block(n), 1.0)
+    material = CreepMaterial(1e6, 0.0, beta1=0.0, density_kg_m3=rho)
+
+    def solver_at(force):
+        punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), mu)], punch,
+                           CreepSettings(tolerance=1e-4))
+
+    return (mesh, material, rho * side ** 3, g, CreepSettings().stick_mm, np.array([0.0, 0.005, 0.01, 0.015, 0.02]),
+            solver_at)
+
+
 def test_the_reduced_model_sticks_below_coulombs_limit_and_slides_at_its_rate_above():
     # the rough-floor block of the full model's test, reduced: modes from full runs that stick
     # (half of μ M g) and slide (twice it); the reduced runs at forces neither had must stick
     # within the elastic stick's reach below μ M g (0.4 of it: the stick's swing, twice
     # F ε / μ M g, stays inside ε) and slide as the analytic rigid block above it — and
     # without friction the same modes slide at any force
-    n, rho, g, e, mu = 3, 1000.0, 9.81, 1e6, 0.5
-    side = n * MM
-    mass = rho * side ** 3
-    mesh = voxel_mesh(block(n), 1.0)
-    eps_mm = CreepSettings().stick_mm
-    material = CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho)
-    times = np.array([0.0, 0.005, 0.01, 0.015, 0.02])
+    mu = 0.5
+    mesh, material, mass, g, eps_mm, times, solver = _rough_floor_block(mu)
 
     def solver_at(ratio):
-        force = ratio * mu * mass * g
-        punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
-        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), mu)], punch,
-                           CreepSettings(tolerance=1e-4))
+        return solver(ratio * mu * mass * g)
 
     snapshots = [solver_at(r).run(times) for r in (0.5, 2.0)]
     bottom = mesh.nodes_mm[:, 1] < 1e-9
@@ -573,19 +584,8 @@ def test_the_reduced_model_run_at_another_friction_sticks_and_slides_by_coulombs
     # 1.0 (the fitted friction of a driven slide reaches the reduced model this way): a push of
     # 0.375 M g slides it at μ 0.25 as the analytic rigid block at μ 0.25 does, and holds it at
     # μ 1.0 and at the μ it was made at, within the elastic stick's swing
-    n, rho, g, e, made = 3, 1000.0, 9.81, 1e6, 0.5
-    side = n * MM
-    mass = rho * side ** 3
-    mesh = voxel_mesh(block(n), 1.0)
-    eps_mm = CreepSettings().stick_mm
-    material = CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho)
-    times = np.array([0.0, 0.005, 0.01, 0.015, 0.02])
-
-    def solver_at(force):
-        punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
-        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), made)], punch,
-                           CreepSettings(tolerance=1e-4))
-
+    made = 0.5
+    mesh, material, mass, g, eps_mm, times, solver_at = _rough_floor_block(made)
     snapshots = [solver_at(r * made * mass * g).run(times) for r in (0.5, 2.0)]
     reduced = _reduced_of(solver_at(0.0), snapshots, tolerance=1e-4)
     force = 0.375 * mass * g
