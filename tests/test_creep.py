@@ -110,6 +110,29 @@ def test_conformed_voxels_lie_on_a_lumpy_surface(seed):
     assert smallest.min() > 0.0                                  # nothing folded
 
 
+def test_a_voxel_that_conforming_would_flatten_is_moved_half_as_far_not_a_crash():
+    # one voxel and a flat square through its middle: each corner's closest point is its
+    # projection, top and bottom corners meet and the voxel is flat (det J = 0 at every point:
+    # inverting J raised before the fold check could see it, a mesh of slide_stop_s49's true
+    # surface at 1.25 × its lattice spacing did); the fold check halves the moves instead
+    import trimesh
+
+    from hifumotion.creep.hexahedra import general_blocks
+    from hifumotion.creep.voxels import conform
+
+    mesh = voxel_mesh(np.array([[0.5, 0.5, 0.5]]), 1.0)
+    flat = np.array([[-1.0, 0.5, -1.0], [2.0, 0.5, -1.0], [2.0, 0.5, 2.0], [-1.0, 0.5, 2.0]])
+    plane = trimesh.Trimesh(flat, [[0, 1, 2], [0, 2, 3]], process=False)
+    squashed = mesh.nodes_mm.copy()
+    squashed[:, 1] = 0.5
+    *_, flattened = general_blocks(squashed * MM, mesh.elements, np.arange(1))
+    assert flattened[0] == 0.0
+    conformed = conform(mesh, plane, floor_mm=None)
+    *_, smallest = general_blocks(conformed.nodes_mm * MM, conformed.elements, np.arange(1))
+    assert smallest[0] > 0.0
+    np.testing.assert_allclose(np.ptp(conformed.nodes_mm[:, 1]), 0.5)       # moved half way
+
+
 def test_creep_under_a_held_load_follows_the_kelvin_voigt_law():
     # ν = 0, β2 = 0 (μ = β1): σ = E ε + 2μ ε̇ uniaxially, so ε(t) = σ/E (1 − exp(−E t / 2μ))
     n, e, mu, force = 3, 5e3, 2e3, 0.01
