@@ -14,8 +14,9 @@ time and compares the lattice's motion with the stored one:
 
 Printed (JSON), per variant and every ``--every`` frames: the RMS difference of the lattice's
 positions (µm) and its split into the common shift, the rest without it, the rest without the
-best rigid motion (the shape's own difference) and the turn between the two (degrees); the
-truth's RMS motion; the variant's mesh size, steps and wall time. A converged truth moves the
+best rigid motion (the shape's own difference) and the turn between the two (degrees, and its
+rotation vector); each one's own turn since frame 0; the truth's RMS motion; the variant's mesh
+size, steps and wall time. Each variant's line also goes to stderr as it ends. A converged truth moves the
 same under each variant, within a small fraction of its motion. The twins' earlier sweeps were
 made on a push (docs/decisions.md, issue 41); a slide's convergence is the question here::
 
@@ -32,7 +33,7 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -122,24 +123,33 @@ def main() -> None:
         # one solve per core
         for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
             os.environ[name] = "1"
-    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
-        runs = list(pool.map(rerun, [args.twin] * len(variants), variants, [args.until] * len(variants),
-                             [args.penalty] * len(variants), [args.slip] * len(variants)))
     out = {"twin": str(args.twin), "until_s": args.until, "penalty_factor": args.penalty, "slip_divisor": args.slip,
            "variants": {}}
-    for run in runs:
-        positions, variant = run.pop("positions_mm"), run.pop("variant")
-        n = min(len(positions), len(stored))
-        frames = list(range(0, n, args.every)) + ([n - 1] if (n - 1) % args.every else [])
-        # each from its own settled frame 0: the protocol's motion (the settle is not the question)
-        splits = [split_difference(stored[0] + positions[f] - positions[0], stored[f]) for f in frames]
-        motion = [float(np.sqrt(((stored[f] - stored[0]) ** 2).sum(1).mean()) * 1000) for f in frames]
-        out["variants"][variant] = {
-            **{k: (round(v, 2) if isinstance(v, float) else v) for k, v in run.items()},
-            "frames": frames, "truth_rms_motion_um": np.round(motion, 1).tolist(),
-            **{f"{k}": np.round([s[k] for s in splits], 2 if k == "turn_deg" else 1).tolist() for k in splits[0]},
-            "settled_frame0_rms_um": round(float(np.sqrt(((positions[0] - stored[0]) ** 2).sum(1).mean()) * 1000), 1),
-            "rms_over_motion_at_last": round(splits[-1]["rms_um"] / max(motion[-1], 1e-9), 4)}
+    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
+        futures = [pool.submit(rerun, args.twin, v, args.until, args.penalty, args.slip) for v in variants]
+        for done in as_completed(futures):
+            run = done.result()
+            positions, variant = run.pop("positions_mm"), run.pop("variant")
+            n = min(len(positions), len(stored))
+            frames = list(range(0, n, args.every)) + ([n - 1] if (n - 1) % args.every else [])
+            # each from its own settled frame 0: the protocol's motion (the settle is not the question)
+            splits = [split_difference(stored[0] + positions[f] - positions[0], stored[f]) for f in frames]
+            motion = [float(np.sqrt(((stored[f] - stored[0]) ** 2).sum(1).mean()) * 1000) for f in frames]
+            # the whole sample's own turn (rotation vector since frame 0, degrees): the variant's, the stored truth's
+            turns = {"variant_turn_vector_deg": [np.round(split_difference(positions[0], positions[f])["turn_vector_deg"],
+                                                          3).tolist() for f in frames],
+                     "truth_turn_vector_deg": [np.round(split_difference(stored[0], stored[f])["turn_vector_deg"],
+                                                        3).tolist() for f in frames]}
+            out["variants"][variant] = {
+                **{k: (round(v, 2) if isinstance(v, float) else v) for k, v in run.items()},
+                "frames": frames, "truth_rms_motion_um": np.round(motion, 1).tolist(),
+                **{k: (np.round([s[k] for s in splits], 2 if k == "turn_deg" else 1).tolist() if k != "turn_vector_deg"
+                       else [np.round(s[k], 3).tolist() for s in splits]) for k in splits[0]},
+                **turns,
+                "settled_frame0_rms_um": round(float(np.sqrt(((positions[0] - stored[0]) ** 2).sum(1).mean()) * 1000), 1),
+                "rms_over_motion_at_last": round(splits[-1]["rms_um"] / max(motion[-1], 1e-9), 4)}
+            # each variant as it ends (a long run's first results are not lost to its last)
+            print(json.dumps({"variant": variant, **out["variants"][variant]}), file=sys.stderr, flush=True)
     print(json.dumps(out, indent=1))
 
 
