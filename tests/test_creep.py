@@ -629,6 +629,30 @@ def test_the_reduced_model_run_at_another_friction_sticks_and_slides_by_coulombs
         reduced.run(material, lambda t: force, (), times, friction=-0.1)
 
 
+def test_the_balanced_floor_reactions_carry_the_weight_and_the_push():
+    # a block on a rough floor pressed from above by the bar: at rest the floor carries M g + F
+    # (vertical equilibrium), which the balance gives the friction's limits whatever the rows say
+    n, rho, g, mu = 3, 1000.0, 9.81, 0.5
+    side = n * MM
+    mass = rho * side ** 3
+    mesh = voxel_mesh(block(n), 1.0)
+    material = CreepMaterial(1e6, 0.0, beta1=0.0, density_kg_m3=rho)
+    times = np.array([0.0, 0.005, 0.01])
+
+    def solver_at(force):
+        punch = Punch((side / 2, side, side / 2), (0.0, -1.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), mu)], punch,
+                           CreepSettings(tolerance=1e-4))
+
+    push = 3 * mass * g
+    snapshots = [solver_at(f * push).run(times) for f in (0.5, 2.0)]
+    reduced = _reduced_of(solver_at(push), snapshots, tolerance=1e-4, friction_balance=True)
+    settled = reduced.settle(reduced.loads(material), push)
+    floor = reduced.friction.body[settled.friction.pressing] == 0
+    carried = settled.friction.limit_n[settled.friction.pressing][floor].sum() / mu
+    assert carried == pytest.approx(mass * g + push, rel=1e-9)
+
+
 @pytest.mark.parametrize("scale", [0.7, 1.4])
 def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snapshots_never_had(scale):
     # an ellipsoid pushed onto a rough floor: its curved bottom lands on the floor as it is
