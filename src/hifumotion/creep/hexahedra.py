@@ -208,17 +208,7 @@ def _b_at(x_e, p0, p1, p2, b):
         # its nodes back); np.linalg.inv would raise on an exactly flat one
         b[:, :] = 0.0
         return det
-    # J⁻¹ as its adjugate over det
-    inv = np.empty((3, 3))
-    inv[0, 0] = (jac[1, 1] * jac[2, 2] - jac[1, 2] * jac[2, 1]) / det
-    inv[0, 1] = (jac[0, 2] * jac[2, 1] - jac[0, 1] * jac[2, 2]) / det
-    inv[0, 2] = (jac[0, 1] * jac[1, 2] - jac[0, 2] * jac[1, 1]) / det
-    inv[1, 0] = (jac[1, 2] * jac[2, 0] - jac[1, 0] * jac[2, 2]) / det
-    inv[1, 1] = (jac[0, 0] * jac[2, 2] - jac[0, 2] * jac[2, 0]) / det
-    inv[1, 2] = (jac[0, 2] * jac[1, 0] - jac[0, 0] * jac[1, 2]) / det
-    inv[2, 0] = (jac[1, 0] * jac[2, 1] - jac[1, 1] * jac[2, 0]) / det
-    inv[2, 1] = (jac[0, 1] * jac[2, 0] - jac[0, 0] * jac[2, 1]) / det
-    inv[2, 2] = (jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]) / det
+    inv = np.linalg.inv(jac)
     for a in range(8):
         gx = inv[0, 0] * dn[a, 0] + inv[0, 1] * dn[a, 1] + inv[0, 2] * dn[a, 2]
         gy = inv[1, 0] * dn[a, 0] + inv[1, 1] * dn[a, 1] + inv[1, 2] * dn[a, 2]
