@@ -73,15 +73,17 @@ def point_error(reduced: np.ndarray, implicit: np.ndarray) -> tuple[float, float
     return float(error.max()), float(motion.max())
 
 
-def _twin_models(twin: Path, particles: int):
+def _twin_models(twin: Path, particles: int, kinematics: str = "small_strain"):
     """The observation ``bench_estimation`` fits and, at the twin's own parameters K, its
     paper-resolution model on the implicit path and the same model (the same mesh) on the
-    reduced one: ``(observed, observation, training frames, K, implicit spec, reduced spec)``."""
+    reduced one, both with ``kinematics`` (``CreepSettings.kinematics``):
+    ``(observed, observation, training frames, K, implicit spec, reduced spec)``."""
     from dataclasses import replace
 
     from bench_estimation import _twin_settings, observe
 
     from hifumotion.creep.linear import set_threads
+    from hifumotion.creep.settings import CreepSettings
     from hifumotion.estimation.model import ModelSettings, Parameters, model_spec
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.experiment.config import ImagingConfig
@@ -96,17 +98,18 @@ def _twin_models(twin: Path, particles: int):
     k = Parameters(force, p["youngs_modulus_pa"], p["poisson_ratio"], p["beta1_pa_s_pow"], p["beta2"],
                    friction=p.get("friction"))
     set_threads(1)   # one core, as the issue's targets and the calibration's workers
-    implicit = model_spec(obs, ModelSettings(tissue_particles=particles))
+    creep = CreepSettings(kinematics=kinematics)
+    implicit = model_spec(obs, ModelSettings(tissue_particles=particles, creep=creep))
     implicit.voxels()   # made once, shared by the reduced spec
     reduced = replace(implicit, settings=ModelSettings(tissue_particles=particles, integrator="reduced",
-                                                       reduced_span=SNAPSHOT_SCALES))
+                                                       reduced_span=SNAPSHOT_SCALES, creep=creep))
     return observed, obs, train, k, implicit, reduced
 
 
-def run_twin(twin: Path, particles: int) -> dict:
+def run_twin(twin: Path, particles: int, kinematics: str = "small_strain") -> dict:
     from hifumotion.estimation.model import run_model
 
-    observed, obs, _, k, implicit, reduced = _twin_models(twin, particles)
+    observed, obs, _, k, implicit, reduced = _twin_models(twin, particles, kinematics)
     last = len(observed.frames) - 1
     simulated_s = last * observed.frame_interval_s
     t0 = time.perf_counter()
@@ -136,12 +139,13 @@ def run_twin(twin: Path, particles: int) -> dict:
                                                    for r in rows if r["force_over_youngs_scale"] in (1.0, 0.5, 2.0)),
     }
     return {"twin": twin.name, "particles": int(len(implicit.tissue_mm)), "frames": last + 1,
-            "simulated_s": round(simulated_s, 3), "modes": model.basis.size,
+            "kinematics": kinematics, "simulated_s": round(simulated_s, 3), "modes": model.basis.size,
+            "elastic_voxels": model.corotation.size if model.corotation is not None else None,
             "contact_rows": int(len(model.rows)), "construction_s": round(build_s, 2), "runs": rows,
             "targets": targets}
 
 
-def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
+def run_online(twin: Path, particles: int, horizon_s: float = 0.3, kinematics: str = "small_strain") -> dict:
     from bench_estimation import _twin_settings
 
     from hifumotion.estimation.model import run_model
@@ -150,7 +154,7 @@ def run_online(twin: Path, particles: int, horizon_s: float = 0.3) -> dict:
     from hifumotion.prediction.online import online_loop, polygon_centroid
     from hifumotion.scoring import read_frame_masks
 
-    observed, obs, train, k, implicit, reduced = _twin_models(twin, particles)
+    observed, obs, train, k, implicit, reduced = _twin_models(twin, particles, kinematics)
     n = len(observed.frames)
     last = n - 1
     dt = observed.frame_interval_s
@@ -245,6 +249,8 @@ def main() -> None:
     ap.add_argument("--work", type=Path, default=ROOT / ".bench" / "twins")
     ap.add_argument("--online", action="store_true",
                     help="the online loop on the push_change twins and the large-motion slides instead")
+    ap.add_argument("--kinematics", default="small_strain", choices=("small_strain", "corotational"),
+                    help="the fast path's kinematics, in both the implicit and the reduced model")
     ap.add_argument("--reference-sensitivity", action="store_true",
                     help="instead: how much the implicit path's own motion changes at half its step tolerance "
                          "and twice its stick reach (F/E × 1 and × 2)")
@@ -265,7 +271,7 @@ def main() -> None:
             names = names[:1]
         particles = args.particles or (1000 if args.quick else 4399)
         twins = [args.twin] if args.twin is not None else [twin_folder(args.work, n) for n in names]
-        results = [run_online(t, particles) for t in twins]
+        results = [run_online(t, particles, kinematics=args.kinematics) for t in twins]
         for r in results:
             print(json.dumps(r), flush=True)
         print(json.dumps({"summary": {"twins": len(results),
@@ -281,7 +287,7 @@ def main() -> None:
         twins = [twin_folder(args.work, n) for n in names]
     results = []
     for twin in twins:
-        results.append(run_twin(twin, particles))
+        results.append(run_twin(twin, particles, args.kinematics))
         print(json.dumps(results[-1]), flush=True)
     summary = {"twins": len(results),
                "all_targets_met": all(all(r["targets"].values()) for r in results),

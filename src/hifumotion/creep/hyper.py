@@ -68,8 +68,6 @@ def ecsw(blocks: np.ndarray, modes: np.ndarray, rates_q: np.ndarray, material: C
     """The sampled voxels and weights of ``blocks`` ``(voxels, r, r)`` (B_e per unit μ), their
     :func:`rate_modes` ``modes``, for the training velocities ``rates_q`` ``(J, r)`` under Eq. 16
     with ``material``'s law at its β2 and β2 ± 0.2 (module docstring)."""
-    from scipy.optimize import nnls
-
     n = len(blocks)
     if len(rates_q) == 0 or n == 0:
         return SampledViscosity(np.arange(n), np.ones(n), 0.0)
@@ -86,6 +84,20 @@ def ecsw(blocks: np.ndarray, modes: np.ndarray, rates_q: np.ndarray, material: C
         # each training force weighs the same: relative to its own size
         columns.append((forces[keep] / size[keep, None, None]).transpose(0, 2, 1).reshape(-1, n))
     a = np.vstack(columns)                                                 # (equations, voxels)
+    active, weights, residual = greedy_weights(a, tolerance, max_voxels)
+    return SampledViscosity(active, weights, residual)
+
+
+def greedy_weights(a: np.ndarray, tolerance: float, max_voxels: int | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
+    """ECSW's voxels and non-negative weights for the equations ``a`` ``(equations, voxels)``,
+    whose right-hand side is every voxel at weight 1 (``a.sum(axis=1)``): a greedy NNLS (module
+    docstring) stopped when the residual is below ``tolerance`` of the right-hand side or at
+    ``max_voxels``. Returns (sorted voxels, their weights, the relative residual); every voxel at
+    weight 1 (residual 0) if none was picked."""
+    from scipy.optimize import nnls
+
+    n = a.shape[1]
     b = a.sum(axis=1)
     target = tolerance * np.linalg.norm(b)
     limit = max_voxels or n
@@ -107,10 +119,9 @@ def ecsw(blocks: np.ndarray, modes: np.ndarray, rates_q: np.ndarray, material: C
         weights = weights[kept]
         residual = b - a[:, active] @ weights
     if not active:
-        return SampledViscosity(np.arange(n), np.ones(n), 0.0)
+        return np.arange(n), np.ones(n), 0.0
     order = np.argsort(active)
-    return SampledViscosity(np.asarray(active)[order], weights[order],
-                            float(np.linalg.norm(residual) / max(np.linalg.norm(b), 1e-300)))
+    return (np.asarray(active)[order], weights[order],
+            float(np.linalg.norm(residual) / max(np.linalg.norm(b), 1e-300)))
 
-
-__all__ = ["SampledViscosity", "ecsw", "rate_modes", "shear_rates"]
+__all__ = ["SampledViscosity", "ecsw", "greedy_weights", "rate_modes", "shear_rates"]

@@ -25,7 +25,10 @@ SOFA's ModelOrderReduction):
   once), ``C_r(μ) = Σ_e μ_e V_eᵀ C_e V_e`` (Eq. 16's μ per voxel from its shear rate, the
   full model's rate on ``V_u q̇``, read from q̇ directly (:func:`.hyper.shear_rates`): the
   viscosity's non-linearity is kept whole; optionally on ECSW's sampled voxels, :mod:`.hyper`),
-  ``M_r = V_uᵀ M V_u``. The force F(t) does the work
+  ``M_r = V_uᵀ M V_u``. A corotational mesh (``CreepSettings.kinematics``) turns K with each
+  voxel: its reduced force and K_R,r are taken on ECSW's sampled voxels at each step's guess
+  and again by the step's rounds while the solution turns on (:mod:`.reduced_corotation`).
+  The force F(t) does the work
   ``F s``, so its generalised force is ``F v_s``. The contacts' normal reactions do no work
   on the modes (a pressed node moves only along its surface), so they leave the projected
   equation; their friction does, and stays (``Wᵀ f``, :mod:`.reduced_friction`).
@@ -49,6 +52,7 @@ from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rat
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
 from hifumotion.creep.nnls import load_compiled, nnls_from
 from hifumotion.creep.reduced_bar import ReducedBarRows
+from hifumotion.creep.reduced_corotation import CorotatedForce, ReducedCorotation
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
@@ -194,9 +198,9 @@ class ReducedCreep:
     """
 
     def __init__(self, solver, basis: ReducedBasis, settings: ReducedSettings | None = None):
-        if solver.large is not None:
-            raise InputError(f"the reduced model is small-strain: kinematics = {solver.settings.kinematics} needs "
-                             "the implicit integrator", "kinematics")
+        if solver.settings.kinematics not in ("small_strain", "corotational"):
+            raise InputError(f"the reduced model is small-strain or corotational: kinematics = "
+                             f"{solver.settings.kinematics} needs the implicit integrator", "kinematics")
         self.settings = settings or ReducedSettings()
         basis = self.basis = held_on_solids(basis, solver, self.settings.kept_on_solid * solver.dx_m)
         self.mesh = solver.mesh
@@ -215,6 +219,11 @@ class ReducedCreep:
         self.weight = v.T @ solver.body_force.ravel() - solver.anchor_stiffness * (v.T @ settled_m)
         self.mass = v.T @ (np.repeat(solver.mass, 3)[:, None] * v)
         self.anchor = solver.anchor_stiffness * (v.T @ v)
+        # corotational: the elastic force turns with its voxels, on ECSW's sample (.reduced_corotation)
+        self.corotation = None
+        if solver.settings.kinematics == "corotational":
+            self.corotation = ReducedCorotation(m, solver.rest_m, v, settled_m, basis.snapshot_coordinates,
+                                                self.settings.corotation_tolerance, self.settings.hyper_samples)
         # Σ_e μ_e V_eᵀ C_e V_e: one r × r block per voxel
         elements = m.elements
         dofs = (3 * elements[:, :, None] + np.arange(3)).reshape(len(elements), 24)
@@ -398,16 +407,46 @@ class ReducedCreep:
                 # no candidates: the solids it was made with were frictionless
                 raise InputError(f"the reduced model was made without friction; it cannot run at μ_f = {friction}",
                                  "friction")
-        return ReducedLoads(material, 2 * g * self.deviatoric + kappa * self.volumetric + self.anchor,
-                            self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric,
-                            2 * g, kappa, scale)
+        if self.corotation is None:
+            return ReducedLoads(material, 2 * g * self.deviatoric + kappa * self.volumetric + self.anchor,
+                                self.weight - 2 * g * self.settled_deviatoric - kappa * self.settled_volumetric,
+                                2 * g, kappa, scale)
+        # corotational: linearised at q = 0 (each step takes it again where it goes, :meth:`_elastic`)
+        at_rest = self.corotation.at(np.zeros(self.basis.size), 2 * g, kappa)
+        return ReducedLoads(material, at_rest.matrix + self.anchor, self.weight - at_rest.force, 2 * g, kappa, scale)
+
+    def _elastic(self, loads: "ReducedLoads", at: np.ndarray) -> tuple[np.ndarray, np.ndarray, CorotatedForce | None]:
+        """The elastic force (with the anchor, less the weight) linearised at ``at``: ``matrix @ q −
+        load``, and the corotational force it was taken from (None: small strain, where it is
+        ``loads``' own, exact at every q)."""
+        if self.corotation is None:
+            return loads.stiffness, loads.load, None
+        # each voxel's part of the matrix is kept while its rotation is within a whole step tolerance
+        # of the one it was taken at (ten times the rounds' criterion): a stale part by δθ errs by δθ
+        # times the step's predictor error, far below the tolerance
+        turned = self.corotation.at(at, loads.two_g_pa, loads.kappa_pa, self.settings.tolerance * self.dx_m)
+        return turned.matrix + self.anchor, self.weight - turned.force + turned.matrix @ at, turned
+
+    def _turned_on(self, turned: CorotatedForce | None, q: np.ndarray) -> bool:
+        """Whether a corotational solution ``q`` turned from where its force was taken by more than
+        a tenth of the step tolerance (the full model's criterion)."""
+        return turned is not None and self.corotation.moved(turned, q, 0.1 * self.settings.tolerance * self.dx_m)
 
     def settle(self, loads: "ReducedLoads", force_n: float, stats: dict | None = None) -> "ReducedState":
         """Frame 0: static equilibrium under the weight and the bar's ``force_n`` (N) in this
         material (the snapshots' settled state u₀ was another material's)."""
         stats = step_counters(self) if stats is None else stats
         r = self.basis.size
-        q = self._solve(loads.stiffness, loads.load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
+        q = np.zeros(r)
+        stiffness, load, turned = loads.stiffness, loads.load, None
+        if self.corotation is not None:
+            stiffness, load, turned = self._elastic(loads, q)
+        for _ in range(1 + (4 * self.settings.rotation_rounds if turned is not None else 0)):
+            q = self._solve(stiffness, load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
+            if not self._turned_on(turned, q):
+                break
+            stiffness, load, turned = self._elastic(loads, q)
+            stats["rotation_rounds"] += 1
         return self.lag_viscosity(ReducedState(0.0, q, np.zeros(r), np.zeros((r, r)), None), loads, force_n)
 
     def step(self, state: "ReducedState", loads: "ReducedLoads", dt: float, force_n: float,
@@ -422,30 +461,42 @@ class ReducedCreep:
         penalty, :func:`driven_bar`; the force it takes is ``stats["bar_force_n"]``."""
         stats = step_counters(self) if stats is None else stats
         q, qdot, visc = state.q, state.qdot, state.viscous
-        a = loads.stiffness + visc / dt + self.mass / dt ** 2
-        rhs = self.mass @ (q + dt * qdot) / dt ** 2 + visc @ q / dt + loads.load
-        spring = None
-        if advance_m is None:
-            rhs = rhs + force_n * self.basis.advance_modes_m
-        else:
-            spring, target = driven_bar(a, self.basis.advance_modes_m), float(advance_m)
-            a = a + spring * np.outer(self.basis.advance_modes_m, self.basis.advance_modes_m)
-            rhs = rhs + spring * target * self.basis.advance_modes_m
+        dynamic = visc / dt + self.mass / dt ** 2
+        inertia = self.mass @ (q + dt * qdot) / dt ** 2 + visc @ q / dt
+        # the rounds: the friction linearised where the last round ended (first where the step's
+        # rate would take it), at the normal reactions lagged a step, until its law holds at the
+        # solution; a corotational force taken again there while the solution turns on
+        guess = q + dt * qdot
+        stiffness, load, turned = self._elastic(loads, guess)
         friction = state.friction
-        if friction is None or not np.any(friction.limit_n > 0):
-            qnew = self._solve(a, rhs, stats, q)
-        else:
-            # the friction's rounds: linearised where the last round ended (first where the
-            # step's rate would take it), at the normal reactions lagged a step, until the law
-            # holds at the solution
-            guess = q + dt * qdot
-            for _ in range(max(self.settings.friction_rounds, 1)):
+        rubbing = friction is not None and bool(np.any(friction.limit_n > 0))
+        rounds = (max(self.settings.friction_rounds, 1) if rubbing else 1) + (
+            self.settings.rotation_rounds if turned is not None else 0)
+        for _ in range(rounds):
+            a = stiffness + dynamic
+            rhs = inertia + load
+            spring = None
+            if advance_m is None:
+                rhs = rhs + force_n * self.basis.advance_modes_m
+            else:
+                spring, target = driven_bar(a, self.basis.advance_modes_m), float(advance_m)
+                a = a + spring * np.outer(self.basis.advance_modes_m, self.basis.advance_modes_m)
+                rhs = rhs + spring * target * self.basis.advance_modes_m
+            held = True
+            if rubbing:
                 matrix, extra, law = self.friction.linearised(friction, guess)
                 qnew = self._solve(a + matrix, rhs + extra, stats, q)
                 stats["friction_rounds"] += 1
-                if self.friction.law_error(friction, law, qnew) <= self.settings.friction_rtol:
-                    break
-                guess = qnew
+                held = self.friction.law_error(friction, law, qnew) <= self.settings.friction_rtol
+            else:
+                qnew = self._solve(a, rhs, stats, q)
+            turning = self._turned_on(turned, qnew)
+            if held and not turning:
+                break
+            guess = qnew
+            if turning:
+                stiffness, load, turned = self._elastic(loads, qnew)
+                stats["rotation_rounds"] += 1
         qdot_new = (qnew - q) / dt
         err = 0.5 * dt * float(np.abs(self.basis.node_modes_m @ (qdot_new - qdot)).max()) if error else np.nan
         if spring is not None:
@@ -592,7 +643,9 @@ def step_counters(model: ReducedCreep) -> dict:
     return {"steps": 0, "rejected": 0, "modes": model.basis.size, "contact_solves": 0, "nnls_fallbacks": 0,
             "contact_rows": len(model.rows) + (model._bar.size if model._bar is not None else 0), "friction_rounds": 0,
             "friction_candidates": model.friction.size if model.friction is not None else 0,
-            "viscous_voxels": model.sampled.size, "viscous_fit_residual": model.sampled.residual}
+            "viscous_voxels": model.sampled.size, "viscous_fit_residual": model.sampled.residual,
+            "rotation_rounds": 0, "elastic_voxels": model.corotation.size if model.corotation is not None else 0,
+            "elastic_fit_residual": model.corotation.residual if model.corotation is not None else 0.0}
 
 
 def _least_distance(g: np.ndarray, h: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:

@@ -117,6 +117,11 @@ class ReducedSettings:
     hyper_reduction, hyper_tolerance, hyper_samples
         Eq. 16's viscosity on ECSW's sampled voxels (:mod:`.hyper`), fitted to this relative
         error on ``hyper_samples`` of the snapshots' velocities; False sums every voxel.
+    corotation_tolerance, rotation_rounds
+        A corotational mesh (``CreepSettings.kinematics``): its elastic force on ECSW's sampled
+        voxels, fitted to this relative error on ``hyper_samples`` of the snapshots' states (0 sums
+        every voxel; :mod:`.reduced_corotation`); a step takes the rotations again at most
+        ``rotation_rounds`` times while its solution turns on (the settled state: four times as many).
     tolerance, max_step_s, first_step_s
         The step controller's, as :class:`~.integrate.CreepSettings` (spacings, s).
     """
@@ -134,6 +139,8 @@ class ReducedSettings:
     hyper_reduction: bool = True
     hyper_tolerance: Fraction = 1e-3
     hyper_samples: Count = 8
+    corotation_tolerance: Annotated[float, Ge(0), Lt(1)] = 1e-3
+    rotation_rounds: Count = 8
     tolerance: Positive = 0.005
     max_step_s: Positive = 1.0
     first_step_s: Positive | None = None

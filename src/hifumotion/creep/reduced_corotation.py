@@ -1,0 +1,291 @@
+"""The corotational elastic force in the reduced coordinates, on a sample of voxels (SI inside).
+
+The reduced model (:mod:`.reduced`) of a small-strain mesh has a constant stiffness
+``K_r = Vᵀ K V``, made once. With corotational kinematics (:mod:`.corotation`) each voxel's
+force ``f_e = R_e K_e (R_eᵀ x_e − X_e)`` turns with the voxel, so the reduced force
+``Vᵀ f(u₀ + V q)`` and its matrix ``Σ_e V_eᵀ R_e K_e R_eᵀ V_e`` change with q, and summing
+them over every voxel would cost a full-model force a step. As for the viscosity
+(:mod:`.hyper`), ECSW (Farhat et al., IJNME 2014) replaces the sum by a few voxels with
+non-negative weights, chosen so that the reduced elastic forces of the snapshots' own
+states — each voxel's deviatoric and volumetric parts apart, so that any E and ν are served
+— are kept to a tolerance:
+
+    f_r(q) ≈ Σ_{e ∈ S} w_e V_eᵀ R_e K_e (R_eᵀ x_e − X_e),
+    K_R,r  ≈ Σ_{e ∈ S} w_e (R_eᵀ V_e)ᵀ K_e (R_eᵀ V_e),
+
+``K_e = 2G K_dev,e + κ K_vol,e``. Non-negative weights keep K_R,r positive semi-definite.
+The step takes the force linearised with the rotations at a point (the full model's
+``K_R u + loads``; its geometric stiffness left out, as there) and the reduced step's rounds
+take the rotations again while the solution turns on (:meth:`ReducedCorotation.moved`):
+the full corotational model's Picard iteration, on the sample.
+
+The viscosity stays the small-strain one (Eq. 16 on the reference frame's strain rate): of
+a rigid turn at rate ω by θ it reads a rate of order ωθ, which the slides' few degrees leave
+far below their creep (docs/decisions.md, issue 41, session 34).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from hifumotion.creep.hyper import greedy_weights
+
+
+@dataclass(frozen=True)
+class CorotatedForce:
+    """The reduced elastic force at a point and its matrix.
+
+    ``rotations`` ``(sample, 3, 3)`` the sample's rotations at ``at`` (m); ``force`` ``(r,)`` (N
+    per unit q, the total from the rest state) with them; ``matrix`` ``(r, r)`` K_R,r (N/m per
+    unit q²), each voxel's part taken at a rotation within the tolerance of its own there
+    (:meth:`ReducedCorotation.at`)."""
+
+    rotations: np.ndarray
+    force: np.ndarray
+    matrix: np.ndarray
+    at: np.ndarray
+
+
+class ReducedCorotation:
+    """The corotational elastic force of a voxel mesh in reduced coordinates (module docstring).
+
+    Parameters
+    ----------
+    matrices
+        The mesh's :class:`~.hexahedra.MeshMatrices`.
+    rest_m
+        ``(n, 3)`` the nodes at rest (m).
+    node_modes_m
+        ``(3n, r)`` the modes (m per unit q).
+    settled_m
+        ``(3n,)`` the settled state's displacement from rest (m): q = 0.
+    snapshots
+        ``(r, S)`` the snapshots' reduced coordinates: the states ECSW is fitted on (with q = 0).
+    tolerance
+        ECSW's relative error on those states' reduced forces; 0 sums every voxel.
+    samples
+        How many of the snapshots, evenly spread, the fit reads.
+    """
+
+    def __init__(self, matrices, rest_m: np.ndarray, node_modes_m: np.ndarray, settled_m: np.ndarray,
+                 snapshots: np.ndarray, tolerance: float, samples: int):
+        m = matrices
+        elements = m.elements
+        n_el, r = len(elements), node_modes_m.shape[1]
+        self.side_m = m.cube.side_m
+        block_of = np.zeros(n_el, np.int64)
+        block_of[m.distorted] = 1 + np.arange(len(m.distorted))
+        dev = np.concatenate([m.cube.deviatoric[None], m.dev])
+        vol = np.concatenate([m.cube.volumetric[None], m.vol])
+        b = np.concatenate([m.cube.centre_b[None], m.b0])
+        grads = np.stack([b[:, 0, 0::3], b[:, 1, 1::3], b[:, 2, 2::3]], axis=-1)   # ∂N_a/∂X at the centre
+        dofs = (3 * elements[:, :, None] + np.arange(3)).reshape(n_el, 24)
+        modes = node_modes_m[dofs]                                   # (voxels, 24, r)
+        corners = np.asarray(rest_m, float)[elements]
+        local = (corners - corners.mean(axis=1, keepdims=True)).reshape(n_el, 24)   # X_e from its centre
+        settled = np.asarray(settled_m, float)[dofs]
+        self.voxels, self.weights, self.residual = np.arange(n_el), np.ones(n_el), 0.0
+        if tolerance > 0 and n_el:
+            pick = np.unique(np.linspace(0, max(snapshots.shape[1] - 1, 0), samples).astype(int))
+            states = np.hstack([np.zeros((r, 1)), snapshots[:, pick]]) if snapshots.size else np.zeros((r, 1))
+            columns = []
+            for q in states.T:
+                u = settled + modes @ q
+                rot = _rotations(u, grads[block_of])
+                for blocks in (dev, vol):
+                    f = _voxel_forces(u, rot, local, blocks[block_of])       # (voxels, 24)
+                    part = np.einsum("eir,ei->re", modes, f)                  # (r, voxels)
+                    size = np.linalg.norm(part.sum(axis=1))
+                    if size > 0:
+                        columns.append(part / size)
+            if columns:
+                self.voxels, self.weights, self.residual = greedy_weights(np.vstack(columns), tolerance)
+        s = self.voxels
+        self.modes = np.ascontiguousarray(modes[s])
+        self.local = np.ascontiguousarray(local[s])
+        self.settled = np.ascontiguousarray(settled[s])
+        self.grads = np.ascontiguousarray(grads[block_of[s]])
+        self.dev = np.ascontiguousarray(dev[block_of[s]])
+        self.vol = np.ascontiguousarray(vol[block_of[s]])
+        self._weighted_modes = self.modes * self.weights[:, None, None]
+
+    @property
+    def size(self) -> int:
+        return len(self.voxels)
+
+    def rotations(self, q: np.ndarray) -> np.ndarray:
+        """``(sample, 3, 3)``: the sampled voxels' rotations (polar decomposition of F at the centre) at ``q``."""
+        return _rotations(self.settled + self.modes @ q, self.grads)
+
+    def at(self, q: np.ndarray, two_g_pa: float, kappa_pa: float, tolerance_m: float = 0.0) -> CorotatedForce:
+        """The reduced elastic force at ``q`` and K_R,r with the rotations there.
+
+        K_R,r is the weighted sum of each sampled voxel's ``(R_eᵀ V_e)ᵀ K_e (R_eᵀ V_e)``, kept from
+        the last call (of this material) for every voxel whose rotation differs from the one its
+        part was taken at by at most ``tolerance_m`` over the voxel's side: under a push most
+        voxels barely turn from step to step, and these r × r parts are most of the cost. The
+        matrix only steers the step's rounds to the solution, which the force decides."""
+        q = np.ascontiguousarray(q, float)
+        rot = np.empty((self.size, 3, 3))
+        force = np.zeros(self.modes.shape[2])
+        _forces(self.settled, self.modes, q, self.local, self.grads, self.dev, self.vol, float(two_g_pa),
+                float(kappa_pa), self.weights, rot, force)
+        cache = getattr(self, "_parts", None)
+        if cache is None or cache[0] != (two_g_pa, kappa_pa):
+            cache = self._parts = ((two_g_pa, kappa_pa), rot.copy(), self._matrix_parts(rot, two_g_pa, kappa_pa))
+            turned = np.arange(self.size)
+        else:
+            turned = np.flatnonzero(np.abs(rot - cache[1]).reshape(self.size, 9).max(axis=1)
+                                    > tolerance_m / self.side_m)
+            if len(turned):
+                cache[1][turned] = rot[turned]
+                cache[2][turned] = self._matrix_parts(rot[turned], two_g_pa, kappa_pa, turned)
+        matrix = np.tensordot(self.weights, cache[2], axes=1)
+        return CorotatedForce(rot, force, matrix, q.copy())
+
+    def _matrix_parts(self, rot: np.ndarray, two_g_pa: float, kappa_pa: float, voxels: np.ndarray | None = None
+                      ) -> np.ndarray:
+        """``(voxels, r, r)``: ``(R_eᵀ V_e)ᵀ K_e (R_eᵀ V_e)`` of the sampled ``voxels`` (all: None)."""
+        voxels = np.arange(self.size) if voxels is None else voxels
+        modes = self.modes[voxels]
+        r = modes.shape[2]
+        k = two_g_pa * self.dev[voxels] + kappa_pa * self.vol[voxels]
+        turned = np.einsum("eki,eakr->eair", rot, modes.reshape(-1, 8, 3, r)).reshape(modes.shape)
+        parts = np.matmul(turned.transpose(0, 2, 1), np.matmul(k, turned))
+        return 0.5 * (parts + parts.transpose(0, 2, 1))
+
+    def moved(self, taken: CorotatedForce, q: np.ndarray, tolerance_m: float) -> bool:
+        """Whether a sampled voxel's rotation at ``q`` differs from ``taken``'s by more than
+        ``tolerance_m`` over the voxel's side (radians; the full model's criterion)."""
+        return bool(np.abs(self.rotations(q) - taken.rotations).max() > tolerance_m / self.side_m)
+
+
+@njit(cache=True)
+def _polar_rotation(f, out):
+    """out = R of F = R U: Newton's iteration X ← ½ (X + X⁻ᵀ) from F (Higham, SIAM J. Sci. Stat.
+    Comput. 1986; quadratic, a few 3 × 3 inverses where an SVD costs a LAPACK call); an inverted
+    or unconverged F by the SVD, with the nearest proper rotation if det F ≤ 0."""
+    x = f.copy()
+    det = (x[0, 0] * (x[1, 1] * x[2, 2] - x[1, 2] * x[2, 1]) - x[0, 1] * (x[1, 0] * x[2, 2] - x[1, 2] * x[2, 0])
+           + x[0, 2] * (x[1, 0] * x[2, 1] - x[1, 1] * x[2, 0]))
+    if det > 1e-12:
+        cof = np.empty((3, 3))
+        for _ in range(30):
+            # X⁻ᵀ = cof(X) / det X
+            cof[0, 0] = x[1, 1] * x[2, 2] - x[1, 2] * x[2, 1]
+            cof[0, 1] = x[1, 2] * x[2, 0] - x[1, 0] * x[2, 2]
+            cof[0, 2] = x[1, 0] * x[2, 1] - x[1, 1] * x[2, 0]
+            cof[1, 0] = x[0, 2] * x[2, 1] - x[0, 1] * x[2, 2]
+            cof[1, 1] = x[0, 0] * x[2, 2] - x[0, 2] * x[2, 0]
+            cof[1, 2] = x[0, 1] * x[2, 0] - x[0, 0] * x[2, 1]
+            cof[2, 0] = x[0, 1] * x[1, 2] - x[0, 2] * x[1, 1]
+            cof[2, 1] = x[0, 2] * x[1, 0] - x[0, 0] * x[1, 2]
+            cof[2, 2] = x[0, 0] * x[1, 1] - x[0, 1] * x[1, 0]
+            det = x[0, 0] * cof[0, 0] + x[0, 1] * cof[0, 1] + x[0, 2] * cof[0, 2]
+            if det <= 0.0:
+                break
+            change = 0.0
+            for i in range(3):
+                for j in range(3):
+                    new = 0.5 * (x[i, j] + cof[i, j] / det)
+                    change = max(change, abs(new - x[i, j]))
+                    x[i, j] = new
+            if change < 1e-14:
+                out[:, :] = x
+                return
+    w, _, vt = np.linalg.svd(f)
+    r = w @ vt
+    if np.linalg.det(r) < 0.0:
+        for i in range(3):
+            w[i, 2] = -w[i, 2]
+        r = w @ vt
+    out[:, :] = r
+
+
+@njit(cache=True)
+def _forces(settled, modes, q, local, grads, dev, vol, two_g, kappa, weights, rot, force):
+    """Each sampled voxel's rotation at q into ``rot``; Σ_e w_e V_eᵀ R_e K_e (R_eᵀ x_e − X_e) into ``force``."""
+    r = q.shape[0]
+    u = np.empty(24)
+    x = np.empty((8, 3))
+    z = np.empty(24)
+    f = np.empty((3, 3))
+    for e in range(modes.shape[0]):
+        for i in range(24):
+            acc = settled[e, i]
+            for k in range(r):
+                acc += modes[e, i, k] * q[k]
+            u[i] = acc
+        for i in range(3):
+            for j in range(3):
+                f[i, j] = 1.0 if i == j else 0.0
+        for a in range(8):
+            for i in range(3):
+                for j in range(3):
+                    f[i, j] += u[3 * a + i] * grads[e, a, j]
+        _polar_rotation(f, rot[e])
+        re = rot[e]
+        c = np.zeros(3)
+        for a in range(8):
+            for i in range(3):
+                x[a, i] = local[e, 3 * a + i] + u[3 * a + i]
+                c[i] += x[a, i] / 8.0
+        for a in range(8):
+            for i in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += re[k, i] * (x[a, k] - c[k])          # (R_eᵀ x)_i
+                z[3 * a + i] = acc - local[e, 3 * a + i]
+        w = weights[e]
+        for a in range(8):
+            loc = np.zeros(3)
+            for i in range(3):
+                row = 3 * a + i
+                acc = 0.0
+                for j in range(24):
+                    acc += (two_g * dev[e, row, j] + kappa * vol[e, row, j]) * z[j]
+                loc[i] = acc
+            for i in range(3):
+                fi = w * (re[i, 0] * loc[0] + re[i, 1] * loc[1] + re[i, 2] * loc[2])
+                for k in range(r):
+                    force[k] += modes[e, 3 * a + i, k] * fi
+
+
+def _rotations(u: np.ndarray, grads: np.ndarray) -> np.ndarray:
+    """``(voxels, 3, 3)`` R of F = R U at each voxel's centre, F = I + Σ_a u_a ⊗ ∇N_a; ``u``
+    ``(voxels, 24)`` its corners' displacements (m), ``grads`` ``(voxels, 8, 3)`` (1/m). An
+    inverted voxel takes the nearest proper rotation (as :mod:`.corotation`)."""
+    out = np.empty((len(u), 3, 3))
+    _rotations_into(np.ascontiguousarray(u, float), np.ascontiguousarray(grads, float), out)
+    return out
+
+
+@njit(cache=True)
+def _rotations_into(u, grads, out):
+    f = np.empty((3, 3))
+    for e in range(u.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                f[i, j] = 1.0 if i == j else 0.0
+        for a in range(8):
+            for i in range(3):
+                for j in range(3):
+                    f[i, j] += u[e, 3 * a + i] * grads[e, a, j]
+        _polar_rotation(f, out[e])
+
+
+def _voxel_forces(u: np.ndarray, rot: np.ndarray, local: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """``(voxels, 24)`` R_e K_e (R_eᵀ x_e − X_e) (N): ``local`` the corners at rest from the voxel's
+    centre (m), ``u`` their displacements; a translation of the voxel is K's null space, so the
+    corners are taken from their own centre."""
+    x = (local + u).reshape(-1, 8, 3)
+    x = x - x.mean(axis=1, keepdims=True)
+    z = (x @ rot).reshape(-1, 24) - local                      # R_eᵀ x, node by node, less X_e
+    f = np.matmul(k, z[:, :, None])[:, :, 0].reshape(-1, 8, 3)
+    return (f @ rot.transpose(0, 2, 1)).reshape(-1, 24)        # R_e f, node by node
+
+
+__all__ = ["CorotatedForce", "ReducedCorotation"]
