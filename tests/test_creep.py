@@ -1001,6 +1001,28 @@ def test_the_reduced_corotational_force_on_every_voxel_is_the_full_force_project
     asm = matrices.assembly
     k = sp.csr_matrix((k_r.stiffness_data, asm.indices, asm.indptr), shape=(asm.size, asm.size))
     assert np.allclose(at.matrix, modes.T @ (k @ modes), rtol=1e-10, atol=1e-12 * np.abs(at.matrix).max())
+    # the viscosity turned with its voxels: the full model's rates read in each voxel's frame, and its
+    # R C_e Rᵀ projected (every voxel rated and sampled, weight 1)
+    from hifumotion.creep.hyper import rate_modes, shear_rates
+    from hifumotion.creep.reduced_corotation import TurnedViscosity
+
+    every = np.arange(len(mesh.elements))
+    upper = np.triu_indices(modes.shape[1])
+    rates = rate_modes(matrices, modes, every)
+    blocks = np.zeros((len(every), len(upper[0])), np.float32)
+    viscosity = TurnedViscosity(matrices, modes, settled, every, every, np.ones(len(every)), upper, rates, blocks)
+    viscosity.update(q, 0.0)
+    qdot = rng.standard_normal(modes.shape[1]) * 1e-4
+    u = (settled + modes @ q).reshape(-1, 3)
+    assert np.allclose(shear_rates(viscosity.rate_modes, qdot), full.rates((modes @ qdot).reshape(-1, 3), u),
+                       rtol=1e-9, atol=1e-12)
+    c = np.zeros((modes.shape[1],) * 2)
+    c[upper] = blocks.astype(float).sum(axis=0)
+    c.T[upper] = c[upper]
+    state = full.linearised(u)
+    c_full = sp.csr_matrix((full.viscous_data(np.ones(len(every)), state), asm.indices, asm.indptr),
+                           shape=(asm.size, asm.size))
+    assert np.allclose(c, modes.T @ (c_full @ modes), rtol=1e-5, atol=1e-5 * np.abs(c).max())
 
 
 def _block_matrices(n=4):

@@ -52,7 +52,7 @@ from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rat
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
 from hifumotion.creep.nnls import load_compiled, nnls_from
 from hifumotion.creep.reduced_bar import ReducedBarRows
-from hifumotion.creep.reduced_corotation import CorotatedForce, ReducedCorotation
+from hifumotion.creep.reduced_corotation import CorotatedForce, ReducedCorotation, TurnedViscosity
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
@@ -269,6 +269,11 @@ class ReducedCreep:
         self._rated = rated
         self._rate_modes = modes_all[rated]
         self._sample_in_rated = np.searchsorted(rated, self.sampled.voxels)
+        # corotational: the viscosity's rates and blocks turn with their voxels (updated in place)
+        self._turned_viscosity = None
+        if self.corotation is not None:
+            self._turned_viscosity = TurnedViscosity(m, v, settled_m, rated, self._sample_in_rated,
+                                                     self.sampled.weights, self._upper, self._rate_modes, self.viscous)
 
     def __setstate__(self, state: dict) -> None:
         # a model sent from a worker (Dask) or read from a cache: its first step should not pay
@@ -378,9 +383,12 @@ class ReducedCreep:
             y = y - span.T @ (span @ y)
         return a.T @ y
 
-    def _viscosity(self, material: CreepMaterial, qdot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _viscosity(self, material: CreepMaterial, qdot: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 16's μ per voxel (Pa·s) at the shear rates of the reduced velocity ``qdot`` (on the
-        voxels a step reads: ECSW's and the friction's), and C_r (r × r) of it."""
+        voxels a step reads: ECSW's and the friction's), and C_r (r × r) of it; a corotational
+        model's turned with its voxels at ``q``."""
+        if self._turned_viscosity is not None:
+            self._turned_viscosity.update(q, self.settings.tolerance * self.dx_m)
         rated = material.viscosity(shear_rates(self._rate_modes, qdot))
         mu = np.zeros(self._n_voxels)
         mu[self._rated] = rated          # the voxels no one reads are left at 0
@@ -509,7 +517,7 @@ class ReducedCreep:
         μ from its own rates, and the friction's normal reactions and slid anchors. With the
         bar's push ``bar_force_n`` (N) and ``settings.friction_balance``, the floor's and the face's
         reactions carry the sample's balance in all (:meth:`~.reduced_friction.ReducedFriction.balanced`)."""
-        mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot)
+        mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot, state.q)
         friction = state.friction
         if self.friction is not None:
             reactions = self.friction.normal_reactions_n(loads.two_g_pa, loads.kappa_pa, state.q, state.qdot, mu)

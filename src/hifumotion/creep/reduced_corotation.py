@@ -19,9 +19,12 @@ The step takes the force linearised with the rotations at a point (the full mode
 take the rotations again while the solution turns on (:meth:`ReducedCorotation.moved`):
 the full corotational model's Picard iteration, on the sample.
 
-The viscosity stays the small-strain one (Eq. 16 on the reference frame's strain rate): of
-a rigid turn at rate ω by θ it reads a rate of order ωθ, which the slides' few degrees leave
-far below their creep (docs/decisions.md, issue 41, session 34).
+Eq. 16's viscosity turns too (:class:`TurnedViscosity`): its blocks ``R_e C_e R_eᵀ`` and its
+shear rate read in the voxel's frame, as the full corotational model's.
+
+Each voxel's r × r part of a turned matrix costs far more than its force, and under a push
+most voxels barely turn from one step to the next: a part is kept while its voxel's rotation
+stays within a tolerance of the one it was taken at (:class:`VoxelFrames`).
 """
 
 from __future__ import annotations
@@ -49,6 +52,83 @@ class CorotatedForce:
     at: np.ndarray
 
 
+class VoxelFrames:
+    """The rotations of some voxels of a mesh at reduced coordinates q, and their modes turned
+    into each voxel's frame.
+
+    ``voxels`` of ``matrices``' mesh; ``node_modes_m`` ``(3n, r)``; ``settled_m`` ``(3n,)`` the
+    displacement from rest at q = 0 (m)."""
+
+    def __init__(self, matrices, node_modes_m: np.ndarray, settled_m: np.ndarray, voxels: np.ndarray):
+        m = matrices
+        self.voxels = np.asarray(voxels, np.int64)
+        self.side_m = m.cube.side_m
+        self.block_of = np.zeros(len(m.elements), np.int64)
+        self.block_of[m.distorted] = 1 + np.arange(len(m.distorted))
+        b = np.concatenate([m.cube.centre_b[None], m.b0])
+        grads = np.stack([b[:, 0, 0::3], b[:, 1, 1::3], b[:, 2, 2::3]], axis=-1)   # ∂N_a/∂X at the centre
+        dofs = (3 * m.elements[self.voxels][:, :, None] + np.arange(3)).reshape(len(self.voxels), 24)
+        self.modes = np.ascontiguousarray(node_modes_m[dofs])                 # (voxels, 24, r)
+        self.settled = np.ascontiguousarray(np.asarray(settled_m, float)[dofs])
+        self.grads = np.ascontiguousarray(grads[self.block_of[self.voxels]])
+
+    def rotations(self, q: np.ndarray) -> np.ndarray:
+        """``(voxels, 3, 3)``: each voxel's R (polar decomposition of F at its centre) at ``q``."""
+        return _rotations(self.settled + self.modes @ q, self.grads)
+
+    def turned_modes(self, rot: np.ndarray, which: np.ndarray) -> np.ndarray:
+        """``(len(which), 24, r)``: R_eᵀ V_e node by node for the voxels at positions ``which``."""
+        modes = self.modes[which]
+        return np.matmul(rot.transpose(0, 2, 1)[:, None], modes.reshape(len(which), 8, 3, -1)).reshape(modes.shape)
+
+    def turned_since(self, rot: np.ndarray, taken: np.ndarray, tolerance_m: float) -> np.ndarray:
+        """Positions of the voxels whose rotation ``rot`` differs from ``taken`` by more than
+        ``tolerance_m`` over the voxel's side (radians)."""
+        return np.flatnonzero(np.abs(rot - taken).reshape(len(rot), 9).max(axis=1) > tolerance_m / self.side_m)
+
+
+class TurnedViscosity:
+    """Eq. 16's viscosity of a corotational reduced model: each rated voxel's shear rate read in
+    its own frame (``B0 R_eᵀ V_e q̇``), each sampled voxel's block ``(R_eᵀ V_e)ᵀ C_e (R_eᵀ V_e)``,
+    both kept while the voxel's rotation stays within the tolerance of the one they were taken at.
+
+    ``rate_modes`` ``(rated, 6, r)`` and ``viscous`` ``(sampled, r(r+1)/2)`` (single precision,
+    ECSW-weighted upper triangles) are the reduced model's arrays at R = I, updated in place;
+    ``sampled_in_rated`` the sampled voxels' positions among the rated, ``weights`` theirs."""
+
+    def __init__(self, matrices, node_modes_m: np.ndarray, settled_m: np.ndarray, rated: np.ndarray,
+                 sampled_in_rated: np.ndarray, weights: np.ndarray, upper: tuple, rate_modes: np.ndarray,
+                 viscous: np.ndarray):
+        m = matrices
+        self.frames = VoxelFrames(m, node_modes_m, settled_m, rated)
+        of = self.frames.block_of[self.frames.voxels]
+        self.centre_b = np.concatenate([m.cube.centre_b[None], m.b0])[of]                 # (rated, 6, 24)
+        self.sampled = np.asarray(sampled_in_rated, np.int64)
+        self.blocks = np.concatenate([m.cube.viscous[None], m.visc])[of[self.sampled]]   # (sampled, 24, 24)
+        self.weights = np.asarray(weights, float)
+        self.upper = upper
+        self.rate_modes, self.viscous = rate_modes, viscous
+        self.taken = np.broadcast_to(np.eye(3), (len(rated), 3, 3)).copy()
+        self._slot = np.full(len(rated), -1)
+        self._slot[self.sampled] = np.arange(len(self.sampled))
+
+    def update(self, q: np.ndarray, tolerance_m: float) -> None:
+        """Turn the parts of the voxels that turned at ``q`` (module docstring)."""
+        rot = self.frames.rotations(q)
+        which = self.frames.turned_since(rot, self.taken, tolerance_m)
+        if not len(which):
+            return
+        self.taken[which] = rot[which]
+        turned = self.frames.turned_modes(rot[which], which)
+        self.rate_modes[which] = np.matmul(self.centre_b[which], turned)
+        sampled = which[self._slot[which] >= 0]
+        if len(sampled):
+            slots = self._slot[sampled]
+            t = turned[self._slot[which] >= 0]
+            parts = np.matmul(t.transpose(0, 2, 1), np.matmul(self.blocks[slots], t))
+            self.viscous[slots] = (parts[:, self.upper[0], self.upper[1]] * self.weights[slots, None]).astype(np.float32)
+
+
 class ReducedCorotation:
     """The corotational elastic force of a voxel mesh in reduced coordinates (module docstring).
 
@@ -73,94 +153,78 @@ class ReducedCorotation:
     def __init__(self, matrices, rest_m: np.ndarray, node_modes_m: np.ndarray, settled_m: np.ndarray,
                  snapshots: np.ndarray, tolerance: float, samples: int):
         m = matrices
-        elements = m.elements
-        n_el, r = len(elements), node_modes_m.shape[1]
-        self.side_m = m.cube.side_m
-        block_of = np.zeros(n_el, np.int64)
-        block_of[m.distorted] = 1 + np.arange(len(m.distorted))
+        n_el, r = len(m.elements), node_modes_m.shape[1]
+        every = VoxelFrames(m, node_modes_m, settled_m, np.arange(n_el))
+        of = every.block_of
         dev = np.concatenate([m.cube.deviatoric[None], m.dev])
         vol = np.concatenate([m.cube.volumetric[None], m.vol])
-        b = np.concatenate([m.cube.centre_b[None], m.b0])
-        grads = np.stack([b[:, 0, 0::3], b[:, 1, 1::3], b[:, 2, 2::3]], axis=-1)   # ∂N_a/∂X at the centre
-        dofs = (3 * elements[:, :, None] + np.arange(3)).reshape(n_el, 24)
-        modes = node_modes_m[dofs]                                   # (voxels, 24, r)
-        corners = np.asarray(rest_m, float)[elements]
+        corners = np.asarray(rest_m, float)[m.elements]
         local = (corners - corners.mean(axis=1, keepdims=True)).reshape(n_el, 24)   # X_e from its centre
-        settled = np.asarray(settled_m, float)[dofs]
-        self.voxels, self.weights, self.residual = np.arange(n_el), np.ones(n_el), 0.0
+        voxels, self.weights, self.residual = np.arange(n_el), np.ones(n_el), 0.0
         if tolerance > 0 and n_el:
             pick = np.unique(np.linspace(0, max(snapshots.shape[1] - 1, 0), samples).astype(int))
             states = np.hstack([np.zeros((r, 1)), snapshots[:, pick]]) if snapshots.size else np.zeros((r, 1))
             columns = []
             for q in states.T:
-                u = settled + modes @ q
-                rot = _rotations(u, grads[block_of])
+                u = every.settled + every.modes @ q
+                rot = _rotations(u, every.grads)
                 for blocks in (dev, vol):
-                    f = _voxel_forces(u, rot, local, blocks[block_of])       # (voxels, 24)
-                    part = np.einsum("eir,ei->re", modes, f)                  # (r, voxels)
+                    f = _voxel_forces(u, rot, local, blocks[of])                  # (voxels, 24)
+                    part = np.einsum("eir,ei->re", every.modes, f)                 # (r, voxels)
                     size = np.linalg.norm(part.sum(axis=1))
                     if size > 0:
                         columns.append(part / size)
             if columns:
-                self.voxels, self.weights, self.residual = greedy_weights(np.vstack(columns), tolerance)
-        s = self.voxels
-        self.modes = np.ascontiguousarray(modes[s])
-        self.local = np.ascontiguousarray(local[s])
-        self.settled = np.ascontiguousarray(settled[s])
-        self.grads = np.ascontiguousarray(grads[block_of[s]])
-        self.dev = np.ascontiguousarray(dev[block_of[s]])
-        self.vol = np.ascontiguousarray(vol[block_of[s]])
-        self._weighted_modes = self.modes * self.weights[:, None, None]
+                voxels, self.weights, self.residual = greedy_weights(np.vstack(columns), tolerance)
+        self.frames = VoxelFrames(m, node_modes_m, settled_m, voxels)
+        self.local = np.ascontiguousarray(local[voxels])
+        self.dev = np.ascontiguousarray(dev[of[voxels]])
+        self.vol = np.ascontiguousarray(vol[of[voxels]])
+        self._weighted_modes = self.frames.modes * self.weights[:, None, None]
+
+    @property
+    def voxels(self) -> np.ndarray:
+        return self.frames.voxels
 
     @property
     def size(self) -> int:
-        return len(self.voxels)
-
-    def rotations(self, q: np.ndarray) -> np.ndarray:
-        """``(sample, 3, 3)``: the sampled voxels' rotations (polar decomposition of F at the centre) at ``q``."""
-        return _rotations(self.settled + self.modes @ q, self.grads)
+        return len(self.frames.voxels)
 
     def at(self, q: np.ndarray, two_g_pa: float, kappa_pa: float, tolerance_m: float = 0.0) -> CorotatedForce:
         """The reduced elastic force at ``q`` and K_R,r with the rotations there.
 
         K_R,r is the weighted sum of each sampled voxel's ``(R_eᵀ V_e)ᵀ K_e (R_eᵀ V_e)``, kept from
         the last call (of this material) for every voxel whose rotation differs from the one its
-        part was taken at by at most ``tolerance_m`` over the voxel's side: under a push most
-        voxels barely turn from step to step, and these r × r parts are most of the cost. The
+        part was taken at by at most ``tolerance_m`` over the voxel's side (module docstring). The
         matrix only steers the step's rounds to the solution, which the force decides."""
         q = np.ascontiguousarray(q, float)
+        f = self.frames
         rot = np.empty((self.size, 3, 3))
-        force = np.zeros(self.modes.shape[2])
-        _forces(self.settled, self.modes, q, self.local, self.grads, self.dev, self.vol, float(two_g_pa),
+        force = np.zeros(f.modes.shape[2])
+        _forces(f.settled, f.modes, q, self.local, f.grads, self.dev, self.vol, float(two_g_pa),
                 float(kappa_pa), self.weights, rot, force)
         cache = getattr(self, "_parts", None)
         if cache is None or cache[0] != (two_g_pa, kappa_pa):
-            cache = self._parts = ((two_g_pa, kappa_pa), rot.copy(), self._matrix_parts(rot, two_g_pa, kappa_pa))
-            turned = np.arange(self.size)
+            every = np.arange(self.size)
+            cache = self._parts = ((two_g_pa, kappa_pa), rot.copy(), self._matrix_parts(rot, two_g_pa, kappa_pa, every))
         else:
-            turned = np.flatnonzero(np.abs(rot - cache[1]).reshape(self.size, 9).max(axis=1)
-                                    > tolerance_m / self.side_m)
+            turned = f.turned_since(rot, cache[1], tolerance_m)
             if len(turned):
                 cache[1][turned] = rot[turned]
                 cache[2][turned] = self._matrix_parts(rot[turned], two_g_pa, kappa_pa, turned)
-        matrix = np.tensordot(self.weights, cache[2], axes=1)
-        return CorotatedForce(rot, force, matrix, q.copy())
+        return CorotatedForce(rot, force, np.tensordot(self.weights, cache[2], axes=1), q.copy())
 
-    def _matrix_parts(self, rot: np.ndarray, two_g_pa: float, kappa_pa: float, voxels: np.ndarray | None = None
-                      ) -> np.ndarray:
-        """``(voxels, r, r)``: ``(R_eᵀ V_e)ᵀ K_e (R_eᵀ V_e)`` of the sampled ``voxels`` (all: None)."""
-        voxels = np.arange(self.size) if voxels is None else voxels
-        modes = self.modes[voxels]
-        r = modes.shape[2]
-        k = two_g_pa * self.dev[voxels] + kappa_pa * self.vol[voxels]
-        turned = np.einsum("eki,eakr->eair", rot, modes.reshape(-1, 8, 3, r)).reshape(modes.shape)
+    def _matrix_parts(self, rot: np.ndarray, two_g_pa: float, kappa_pa: float, which: np.ndarray) -> np.ndarray:
+        """``(len(which), r, r)``: ``(R_eᵀ V_e)ᵀ K_e (R_eᵀ V_e)`` of the sampled voxels at positions ``which``."""
+        k = two_g_pa * self.dev[which] + kappa_pa * self.vol[which]
+        turned = self.frames.turned_modes(rot, which)
         parts = np.matmul(turned.transpose(0, 2, 1), np.matmul(k, turned))
         return 0.5 * (parts + parts.transpose(0, 2, 1))
 
     def moved(self, taken: CorotatedForce, q: np.ndarray, tolerance_m: float) -> bool:
         """Whether a sampled voxel's rotation at ``q`` differs from ``taken``'s by more than
         ``tolerance_m`` over the voxel's side (radians; the full model's criterion)."""
-        return bool(np.abs(self.rotations(q) - taken.rotations).max() > tolerance_m / self.side_m)
+        return bool(len(self.frames.turned_since(self.frames.rotations(q), taken.rotations, tolerance_m)))
 
 
 @njit(cache=True)
