@@ -31,18 +31,54 @@ from numba import njit, prange
 from hifumotion.creep.hexahedra import deformation_gradient
 
 
+@njit(cache=True)
+def polar_rotation(f, out):
+    """out = R of F = R U: Newton's iteration X ← ½ (X + X⁻ᵀ) from F (Higham, SIAM J. Sci. Stat.
+    Comput. 1986; quadratic, a few 3 × 3 inverses where an SVD costs a LAPACK call); an inverted
+    or unconverged F by the SVD, with the nearest proper rotation if det F ≤ 0."""
+    x = f.copy()
+    det = (x[0, 0] * (x[1, 1] * x[2, 2] - x[1, 2] * x[2, 1]) - x[0, 1] * (x[1, 0] * x[2, 2] - x[1, 2] * x[2, 0])
+           + x[0, 2] * (x[1, 0] * x[2, 1] - x[1, 1] * x[2, 0]))
+    if det > 1e-12:
+        cof = np.empty((3, 3))
+        for _ in range(30):
+            # X⁻ᵀ = cof(X) / det X
+            cof[0, 0] = x[1, 1] * x[2, 2] - x[1, 2] * x[2, 1]
+            cof[0, 1] = x[1, 2] * x[2, 0] - x[1, 0] * x[2, 2]
+            cof[0, 2] = x[1, 0] * x[2, 1] - x[1, 1] * x[2, 0]
+            cof[1, 0] = x[0, 2] * x[2, 1] - x[0, 1] * x[2, 2]
+            cof[1, 1] = x[0, 0] * x[2, 2] - x[0, 2] * x[2, 0]
+            cof[1, 2] = x[0, 1] * x[2, 0] - x[0, 0] * x[2, 1]
+            cof[2, 0] = x[0, 1] * x[1, 2] - x[0, 2] * x[1, 1]
+            cof[2, 1] = x[0, 2] * x[1, 0] - x[0, 0] * x[1, 2]
+            cof[2, 2] = x[0, 0] * x[1, 1] - x[0, 1] * x[1, 0]
+            det = x[0, 0] * cof[0, 0] + x[0, 1] * cof[0, 1] + x[0, 2] * cof[0, 2]
+            if det <= 0.0:
+                break
+            change = 0.0
+            for i in range(3):
+                for j in range(3):
+                    new = 0.5 * (x[i, j] + cof[i, j] / det)
+                    change = max(change, abs(new - x[i, j]))
+                    x[i, j] = new
+            if change < 1e-14:
+                out[:, :] = x
+                return
+    w, _, vt = np.linalg.svd(f)
+    r = w @ vt
+    if np.linalg.det(r) < 0.0:
+        for i in range(3):
+            w[i, 2] = -w[i, 2]
+        r = w @ vt
+    out[:, :] = r
+
+
 @njit(cache=True, parallel=True)
 def _rotations(u, elements, grads, grad_of, out):
     for e in prange(elements.shape[0]):
         f = np.empty((3, 3))
         deformation_gradient(u, elements[e], grads[grad_of[e]], f)
-        w, _, vt = np.linalg.svd(f)
-        r = w @ vt
-        if np.linalg.det(r) < 0.0:   # an inverted voxel: the nearest proper rotation
-            for i in range(3):
-                w[i, 2] = -w[i, 2]
-            r = w @ vt
-        out[e] = r
+        polar_rotation(f, out[e])
 
 
 @njit(cache=True)

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from hifumotion.creep.corotation import polar_rotation
 from hifumotion.creep.hyper import greedy_weights
 
 
@@ -228,48 +229,6 @@ class ReducedCorotation:
 
 
 @njit(cache=True)
-def _polar_rotation(f, out):
-    """out = R of F = R U: Newton's iteration X ← ½ (X + X⁻ᵀ) from F (Higham, SIAM J. Sci. Stat.
-    Comput. 1986; quadratic, a few 3 × 3 inverses where an SVD costs a LAPACK call); an inverted
-    or unconverged F by the SVD, with the nearest proper rotation if det F ≤ 0."""
-    x = f.copy()
-    det = (x[0, 0] * (x[1, 1] * x[2, 2] - x[1, 2] * x[2, 1]) - x[0, 1] * (x[1, 0] * x[2, 2] - x[1, 2] * x[2, 0])
-           + x[0, 2] * (x[1, 0] * x[2, 1] - x[1, 1] * x[2, 0]))
-    if det > 1e-12:
-        cof = np.empty((3, 3))
-        for _ in range(30):
-            # X⁻ᵀ = cof(X) / det X
-            cof[0, 0] = x[1, 1] * x[2, 2] - x[1, 2] * x[2, 1]
-            cof[0, 1] = x[1, 2] * x[2, 0] - x[1, 0] * x[2, 2]
-            cof[0, 2] = x[1, 0] * x[2, 1] - x[1, 1] * x[2, 0]
-            cof[1, 0] = x[0, 2] * x[2, 1] - x[0, 1] * x[2, 2]
-            cof[1, 1] = x[0, 0] * x[2, 2] - x[0, 2] * x[2, 0]
-            cof[1, 2] = x[0, 1] * x[2, 0] - x[0, 0] * x[2, 1]
-            cof[2, 0] = x[0, 1] * x[1, 2] - x[0, 2] * x[1, 1]
-            cof[2, 1] = x[0, 2] * x[1, 0] - x[0, 0] * x[1, 2]
-            cof[2, 2] = x[0, 0] * x[1, 1] - x[0, 1] * x[1, 0]
-            det = x[0, 0] * cof[0, 0] + x[0, 1] * cof[0, 1] + x[0, 2] * cof[0, 2]
-            if det <= 0.0:
-                break
-            change = 0.0
-            for i in range(3):
-                for j in range(3):
-                    new = 0.5 * (x[i, j] + cof[i, j] / det)
-                    change = max(change, abs(new - x[i, j]))
-                    x[i, j] = new
-            if change < 1e-14:
-                out[:, :] = x
-                return
-    w, _, vt = np.linalg.svd(f)
-    r = w @ vt
-    if np.linalg.det(r) < 0.0:
-        for i in range(3):
-            w[i, 2] = -w[i, 2]
-        r = w @ vt
-    out[:, :] = r
-
-
-@njit(cache=True)
 def _forces(settled, modes, q, local, grads, dev, vol, two_g, kappa, weights, rot, force):
     """Each sampled voxel's rotation at q into ``rot``; Σ_e w_e V_eᵀ R_e K_e (R_eᵀ x_e − X_e) into ``force``."""
     r = q.shape[0]
@@ -283,14 +242,8 @@ def _forces(settled, modes, q, local, grads, dev, vol, two_g, kappa, weights, ro
             for k in range(r):
                 acc += modes[e, i, k] * q[k]
             u[i] = acc
-        for i in range(3):
-            for j in range(3):
-                f[i, j] = 1.0 if i == j else 0.0
-        for a in range(8):
-            for i in range(3):
-                for j in range(3):
-                    f[i, j] += u[3 * a + i] * grads[e, a, j]
-        _polar_rotation(f, rot[e])
+        _centre_gradient(u, grads[e], f)
+        polar_rotation(f, rot[e])
         re = rot[e]
         c = np.zeros(3)
         for a in range(8):
@@ -331,14 +284,20 @@ def _rotations(u: np.ndarray, grads: np.ndarray) -> np.ndarray:
 def _rotations_into(u, grads, out):
     f = np.empty((3, 3))
     for e in range(u.shape[0]):
+        _centre_gradient(u[e], grads[e], f)
+        polar_rotation(f, out[e])
+
+
+@njit(cache=True)
+def _centre_gradient(u, grads, f):
+    """f = I + Σ_a u_a ⊗ ∇N_a: ``u`` (24,) a voxel's corner displacements, ``grads`` (8, 3)."""
+    for i in range(3):
+        for j in range(3):
+            f[i, j] = 1.0 if i == j else 0.0
+    for a in range(8):
         for i in range(3):
             for j in range(3):
-                f[i, j] = 1.0 if i == j else 0.0
-        for a in range(8):
-            for i in range(3):
-                for j in range(3):
-                    f[i, j] += u[e, 3 * a + i] * grads[e, a, j]
-        _polar_rotation(f, out[e])
+                f[i, j] += u[3 * a + i] * grads[a, j]
 
 
 def _voxel_forces(u: np.ndarray, rot: np.ndarray, local: np.ndarray, k: np.ndarray) -> np.ndarray:
