@@ -64,7 +64,7 @@ class CreepSettings:
         voxel's rotation taken out of its strain (:mod:`.corotation`), so that a sample may
         turn and slide far with no stress the turn made; ``"neo_hooke"``: finite strain, the
         truth's nearly incompressible neo-Hooke (:mod:`.neo_hooke`). All three agree at small
-        strain. The reduced model is small-strain.
+        strain. The reduced model takes small strain or corotational (:mod:`.reduced_corotation`).
     """
 
     tolerance: Positive = 0.005
