@@ -75,7 +75,9 @@ class VoxelFrames:
 
     def rotations(self, q: np.ndarray) -> np.ndarray:
         """``(voxels, 3, 3)``: each voxel's R (polar decomposition of F at its centre) at ``q``."""
-        return _rotations(self.settled + self.modes @ q, self.grads)
+        out = np.empty((len(self.voxels), 3, 3))
+        _rotations_at(self.settled, self.modes, np.ascontiguousarray(q, float), self.grads, out)
+        return out
 
     def turned_modes(self, rot: np.ndarray, which: np.ndarray) -> np.ndarray:
         """``(len(which), 24, r)``: R_eᵀ V_e node by node for the voxels at positions ``which``."""
@@ -89,45 +91,43 @@ class VoxelFrames:
 
 
 class TurnedViscosity:
-    """Eq. 16's viscosity of a corotational reduced model: each rated voxel's shear rate read in
-    its own frame (``B0 R_eᵀ V_e q̇``), each sampled voxel's block ``(R_eᵀ V_e)ᵀ C_e (R_eᵀ V_e)``,
-    both kept while the voxel's rotation stays within the tolerance of the one they were taken at.
+    """Eq. 16's viscosity of a corotational reduced model on ECSW's sampled voxels: each one's
+    shear rate read in its own frame (``B0 R_eᵀ V_e q̇``) and its block ``(R_eᵀ V_e)ᵀ C_e (R_eᵀ
+    V_e)``, both kept while the voxel's rotation stays within the tolerance of the one they were
+    taken at.
 
     ``rate_modes`` ``(rated, 6, r)`` and ``viscous`` ``(sampled, r(r+1)/2)`` (single precision,
     ECSW-weighted upper triangles) are the reduced model's arrays at R = I, updated in place;
-    ``sampled_in_rated`` the sampled voxels' positions among the rated, ``weights`` theirs."""
+    ``rated`` the voxels whose rates a step reads (the sample's, and the friction's, whose rates
+    only weigh in its normal reactions and stay on the reference frame, as those reactions'
+    elasticity does), ``sampled_in_rated`` the sampled voxels' positions among them, ``weights``
+    theirs."""
 
     def __init__(self, matrices, node_modes_m: np.ndarray, settled_m: np.ndarray, rated: np.ndarray,
                  sampled_in_rated: np.ndarray, weights: np.ndarray, upper: tuple, rate_modes: np.ndarray,
                  viscous: np.ndarray):
         m = matrices
-        self.frames = VoxelFrames(m, node_modes_m, settled_m, rated)
+        self.rows = np.asarray(sampled_in_rated, np.int64)
+        self.frames = VoxelFrames(m, node_modes_m, settled_m, np.asarray(rated)[self.rows])
         of = self.frames.block_of[self.frames.voxels]
-        self.centre_b = np.concatenate([m.cube.centre_b[None], m.b0])[of]                 # (rated, 6, 24)
-        self.sampled = np.asarray(sampled_in_rated, np.int64)
-        self.blocks = np.concatenate([m.cube.viscous[None], m.visc])[of[self.sampled]]   # (sampled, 24, 24)
+        self.centre_b = np.concatenate([m.cube.centre_b[None], m.b0])[of]                 # (sampled, 6, 24)
+        self.blocks = np.concatenate([m.cube.viscous[None], m.visc])[of]                  # (sampled, 24, 24)
         self.weights = np.asarray(weights, float)
         self.upper = upper
         self.rate_modes, self.viscous = rate_modes, viscous
-        self.taken = np.broadcast_to(np.eye(3), (len(rated), 3, 3)).copy()
-        self._slot = np.full(len(rated), -1)
-        self._slot[self.sampled] = np.arange(len(self.sampled))
+        self.taken = np.broadcast_to(np.eye(3), (len(self.rows), 3, 3)).copy()
 
     def update(self, q: np.ndarray, tolerance_m: float) -> None:
-        """Turn the parts of the voxels that turned at ``q`` (module docstring)."""
+        """Turn the parts of the sampled voxels that turned at ``q`` (class docstring)."""
         rot = self.frames.rotations(q)
         which = self.frames.turned_since(rot, self.taken, tolerance_m)
         if not len(which):
             return
         self.taken[which] = rot[which]
         turned = self.frames.turned_modes(rot[which], which)
-        self.rate_modes[which] = np.matmul(self.centre_b[which], turned)
-        sampled = which[self._slot[which] >= 0]
-        if len(sampled):
-            slots = self._slot[sampled]
-            t = turned[self._slot[which] >= 0]
-            parts = np.matmul(t.transpose(0, 2, 1), np.matmul(self.blocks[slots], t))
-            self.viscous[slots] = (parts[:, self.upper[0], self.upper[1]] * self.weights[slots, None]).astype(np.float32)
+        self.rate_modes[self.rows[which]] = np.matmul(self.centre_b[which], turned)
+        parts = np.matmul(turned.transpose(0, 2, 1), np.matmul(self.blocks[which], turned))
+        self.viscous[which] = (parts[:, self.upper[0], self.upper[1]] * self.weights[which, None]).astype(np.float32)
 
 
 class ReducedCorotation:
@@ -204,16 +204,19 @@ class ReducedCorotation:
         force = np.zeros(f.modes.shape[2])
         _forces(f.settled, f.modes, q, self.local, f.grads, self.dev, self.vol, float(two_g_pa),
                 float(kappa_pa), self.weights, rot, force)
+        # (material, rotations the parts were taken at, the parts, their weighted sum)
         cache = getattr(self, "_parts", None)
         if cache is None or cache[0] != (two_g_pa, kappa_pa):
-            every = np.arange(self.size)
-            cache = self._parts = ((two_g_pa, kappa_pa), rot.copy(), self._matrix_parts(rot, two_g_pa, kappa_pa, every))
+            parts = self._matrix_parts(rot, two_g_pa, kappa_pa, np.arange(self.size))
+            cache = self._parts = [(two_g_pa, kappa_pa), rot.copy(), parts, np.tensordot(self.weights, parts, axes=1)]
         else:
             turned = f.turned_since(rot, cache[1], tolerance_m)
             if len(turned):
+                new = self._matrix_parts(rot[turned], two_g_pa, kappa_pa, turned)
+                cache[3] = cache[3] + np.tensordot(self.weights[turned], new - cache[2][turned], axes=1)
                 cache[1][turned] = rot[turned]
-                cache[2][turned] = self._matrix_parts(rot[turned], two_g_pa, kappa_pa, turned)
-        return CorotatedForce(rot, force, np.tensordot(self.weights, cache[2], axes=1), q.copy())
+                cache[2][turned] = new
+        return CorotatedForce(rot, force, cache[3], q.copy())
 
     def _matrix_parts(self, rot: np.ndarray, two_g_pa: float, kappa_pa: float, which: np.ndarray) -> np.ndarray:
         """``(len(which), r, r)``: ``(R_eᵀ V_e)ᵀ K_e (R_eᵀ V_e)`` of the sampled voxels at positions ``which``."""
@@ -285,6 +288,21 @@ def _rotations_into(u, grads, out):
     f = np.empty((3, 3))
     for e in range(u.shape[0]):
         _centre_gradient(u[e], grads[e], f)
+        polar_rotation(f, out[e])
+
+
+@njit(cache=True)
+def _rotations_at(settled, modes, q, grads, out):
+    """out[e] = R of voxel e at q (its corners' displacement ``settled[e] + modes[e] @ q``)."""
+    u = np.empty(24)
+    f = np.empty((3, 3))
+    for e in range(modes.shape[0]):
+        for i in range(24):
+            acc = settled[e, i]
+            for k in range(q.shape[0]):
+                acc += modes[e, i, k] * q[k]
+            u[i] = acc
+        _centre_gradient(u, grads[e], f)
         polar_rotation(f, out[e])
 
 
