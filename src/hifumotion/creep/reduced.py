@@ -52,7 +52,7 @@ from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rat
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
 from hifumotion.creep.nnls import load_compiled, nnls_from
 from hifumotion.creep.reduced_bar import ReducedBarRows
-from hifumotion.creep.reduced_corotation import CorotatedForce, ReducedCorotation, TurnedViscosity
+from hifumotion.creep.reduced_corotation import CandidateForces, CorotatedForce, ReducedCorotation, TurnedViscosity
 from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
 from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
@@ -269,11 +269,15 @@ class ReducedCreep:
         self._rated = rated
         self._rate_modes = modes_all[rated]
         self._sample_in_rated = np.searchsorted(rated, self.sampled.voxels)
-        # corotational: the viscosity's rates and blocks turn with their voxels (updated in place)
-        self._turned_viscosity = None
+        # corotational: the viscosity's rates and blocks turn with their voxels (updated in place),
+        # and the friction's normal reactions take the turned elastic force
+        self._turned_viscosity = self._candidate_forces = None
         if self.corotation is not None:
             self._turned_viscosity = TurnedViscosity(m, v, settled_m, rated, self._sample_in_rated,
                                                      self.sampled.weights, self._upper, self._rate_modes, self.viscous)
+            if self.friction is not None and self.friction.size:
+                self._candidate_forces = CandidateForces(m, solver.rest_m, v, settled_m, self.friction.voxels,
+                                                         self.friction.nodes, self.friction.normals)
 
     def __setstate__(self, state: dict) -> None:
         # a model sent from a worker (Dask) or read from a cache: its first step should not pay
@@ -520,7 +524,9 @@ class ReducedCreep:
         mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot, state.q)
         friction = state.friction
         if self.friction is not None:
-            reactions = self.friction.normal_reactions_n(loads.two_g_pa, loads.kappa_pa, state.q, state.qdot, mu)
+            elastic = (None if self._candidate_forces is None
+                       else self._candidate_forces.normal_n(state.q, loads.two_g_pa, loads.kappa_pa))
+            reactions = self.friction.normal_reactions_n(loads.two_g_pa, loads.kappa_pa, state.q, state.qdot, mu, elastic)
             if bar_force_n is not None and self.settings.friction_balance:
                 reactions = self.friction.balanced(reactions, self.friction.gaps_m(state.q), bar_force_n)
             friction = self.friction.state(state.q, reactions, state.friction, scale=loads.friction_scale)

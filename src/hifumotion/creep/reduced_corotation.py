@@ -130,6 +130,46 @@ class TurnedViscosity:
         self.viscous[which] = (parts[:, self.upper[0], self.upper[1]] * self.weights[which, None]).astype(np.float32)
 
 
+class CandidateForces:
+    """The corotational elastic force on the friction's candidate nodes, along each one's normal
+    (N): the friction's normal reactions from the turned elasticity, as the full model's contact
+    reactions are (the small-strain rows of K read a turned sample's rigid turn as strain, of the
+    order of what its weight strains it by).
+
+    ``voxels`` the voxels that touch a candidate; ``nodes`` ``(c,)`` the candidates' nodes (a node
+    near two solids is two candidates), ``normals`` ``(c, 3)`` theirs."""
+
+    def __init__(self, matrices, rest_m: np.ndarray, node_modes_m: np.ndarray, settled_m: np.ndarray,
+                 voxels: np.ndarray, nodes: np.ndarray, normals: np.ndarray):
+        m = matrices
+        self.frames = VoxelFrames(m, node_modes_m, settled_m, voxels)
+        of = self.frames.block_of[self.frames.voxels]
+        self.dev = np.concatenate([m.cube.deviatoric[None], m.dev])[of]
+        self.vol = np.concatenate([m.cube.volumetric[None], m.vol])[of]
+        corners = np.asarray(rest_m, float)[m.elements[self.frames.voxels]]
+        self.local = (corners - corners.mean(axis=1, keepdims=True)).reshape(len(of), 24)
+        unique, self._candidate = np.unique(np.asarray(nodes, np.int64), return_inverse=True)
+        position = np.full(len(rest_m), -1)
+        position[unique] = np.arange(len(unique))
+        slot = position[m.elements[self.frames.voxels]]                # (voxels, 8): the corner's node, or −1
+        self._voxel, self._corner = np.nonzero(slot >= 0)
+        self._slot = slot[self._voxel, self._corner]
+        self._n_unique = len(unique)
+        self.normals = np.asarray(normals, float)
+        self._k = None
+
+    def normal_n(self, q: np.ndarray, two_g_pa: float, kappa_pa: float) -> np.ndarray:
+        """``(c,)`` each candidate's elastic force along its normal at ``q`` (N)."""
+        if self._k is None or self._k[0] != (two_g_pa, kappa_pa):
+            self._k = ((two_g_pa, kappa_pa), two_g_pa * self.dev + kappa_pa * self.vol)
+        f = self.frames
+        u = f.settled + f.modes @ q
+        forces = _voxel_forces(u, _rotations(u, f.grads), self.local, self._k[1]).reshape(-1, 8, 3)
+        node = np.zeros((self._n_unique, 3))
+        np.add.at(node, self._slot, forces[self._voxel, self._corner])
+        return np.einsum("ck,ck->c", self.normals, node[self._candidate])
+
+
 class ReducedCorotation:
     """The corotational elastic force of a voxel mesh in reduced coordinates (module docstring).
 
@@ -329,4 +369,4 @@ def _voxel_forces(u: np.ndarray, rot: np.ndarray, local: np.ndarray, k: np.ndarr
     return (f @ rot.transpose(0, 2, 1)).reshape(-1, 24)        # R_e f, node by node
 
 
-__all__ = ["CorotatedForce", "ReducedCorotation"]
+__all__ = ["CandidateForces", "CorotatedForce", "ReducedCorotation", "TurnedViscosity", "VoxelFrames"]

@@ -109,7 +109,7 @@ class ReducedFriction:
         self.made_coefficient = float(self.coefficient.max()) if len(self.coefficient) else 0.0
         self.stick_m, self.touch_m = stick_m, touch_m
         frames = contacts.body_frames[self.body] if len(self.body) else np.zeros((0, 3, 3))
-        normals = frames[:, 0]
+        normals = self.normals = frames[:, 0]
         node_modes = modes[self.nodes]                                          # (m, 3, r)
         self.tangent_modes = np.einsum("nak,nkr->nar", frames[:, 1:], node_modes)  # W: (m, 2, r)
         self._tangent_flat = self.tangent_modes.reshape(-1, r)                     # (2m, r)
@@ -171,11 +171,15 @@ class ReducedFriction:
         return gap
 
     def normal_reactions_n(self, two_g: float, kappa: float, q: np.ndarray, qdot: np.ndarray,
-                           mu_pa_s: np.ndarray | None) -> np.ndarray:
+                           mu_pa_s: np.ndarray | None, elastic_n: np.ndarray | None = None) -> np.ndarray:
         """λ_n (N) of every candidate at ``q`` moving at ``qdot``, Eq. 16's μ per voxel of the
-        mesh (None: no viscosity) — the normal part of what its equation of motion lacks."""
-        lam = (two_g * (self.elastic_modes[0] @ q + self.elastic_settled[0])
-               + kappa * (self.elastic_modes[1] @ q + self.elastic_settled[1]) - self.weight_n)
+        mesh (None: no viscosity) — the normal part of what its equation of motion lacks.
+        ``elastic_n``: each candidate's elastic force along its normal (N) when the elasticity is
+        not the small-strain K's rows (a corotational model's, :class:`~.reduced_corotation.CandidateForces`)."""
+        if elastic_n is None:
+            elastic_n = (two_g * (self.elastic_modes[0] @ q + self.elastic_settled[0])
+                         + kappa * (self.elastic_modes[1] @ q + self.elastic_settled[1]))
+        lam = elastic_n - self.weight_n
         if mu_pa_s is not None:
             lam += np.bincount(self._pair_node, mu_pa_s[self._pair_voxel] * (self.viscous_modes @ qdot),
                                minlength=len(lam))
