@@ -1026,6 +1026,16 @@ def test_the_reduced_corotational_force_on_every_voxel_is_the_full_force_project
     c_full = sp.csr_matrix((full.viscous_data(np.ones(len(every)), state), asm.indices, asm.indptr),
                            shape=(asm.size, asm.size))
     assert np.allclose(c, modes.T @ (c_full @ modes), rtol=1e-5, atol=1e-5 * np.abs(c).max())
+    # the friction's candidates' elastic force along their normals: the full force at their nodes (a
+    # node twice, against two solids)
+    from hifumotion.creep.reduced_corotation import CandidateForces
+
+    nodes = np.array([0, 3, 7, 7, 12])
+    normals = np.array([[0, 1, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, -1, 0]], float)
+    touching = np.flatnonzero(np.isin(mesh.elements, nodes).any(axis=1))
+    candidates = CandidateForces(matrices, x, modes, settled, touching, nodes, normals)
+    expected = np.einsum("ck,ck->c", normals, full.forces(u)[nodes])
+    assert np.allclose(candidates.normal_n(q, two_g, kappa), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
 
 
 def _block_matrices(n=4):

@@ -524,8 +524,8 @@ class ReducedCreep:
         mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot, state.q)
         friction = state.friction
         if self.friction is not None:
-            elastic = (None if self._candidate_forces is None
-                       else self._candidate_forces.normal_n(state.q, loads.two_g_pa, loads.kappa_pa))
+            elastic = (None if self._candidate_forces is None else self._candidate_forces.normal_n(
+                state.q, loads.two_g_pa, loads.kappa_pa, self.friction.gaps_m(state.q) <= self.friction.touch_m))
             reactions = self.friction.normal_reactions_n(loads.two_g_pa, loads.kappa_pa, state.q, state.qdot, mu, elastic)
             if bar_force_n is not None and self.settings.friction_balance:
                 reactions = self.friction.balanced(reactions, self.friction.gaps_m(state.q), bar_force_n)

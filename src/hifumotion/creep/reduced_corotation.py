@@ -20,7 +20,8 @@ take the rotations again while the solution turns on (:meth:`ReducedCorotation.m
 the full corotational model's Picard iteration, on the sample.
 
 Eq. 16's viscosity turns too (:class:`TurnedViscosity`): its blocks ``R_e C_e R_eᵀ`` and its
-shear rate read in the voxel's frame, as the full corotational model's.
+shear rate read in the voxel's frame, as the full corotational model's. So does the elastic
+force from which the friction's normal reactions are read (:class:`CandidateForces`).
 
 Each voxel's r × r part of a turned matrix costs far more than its force, and under a push
 most voxels barely turn from one step to the next: a part is kept while its voxel's rotation
@@ -151,23 +152,28 @@ class CandidateForces:
         unique, self._candidate = np.unique(np.asarray(nodes, np.int64), return_inverse=True)
         position = np.full(len(rest_m), -1)
         position[unique] = np.arange(len(unique))
-        slot = position[m.elements[self.frames.voxels]]                # (voxels, 8): the corner's node, or −1
-        self._voxel, self._corner = np.nonzero(slot >= 0)
-        self._slot = slot[self._voxel, self._corner]
+        self._slot = np.ascontiguousarray(position[m.elements[self.frames.voxels]])   # (voxels, 8): node, or −1
         self._n_unique = len(unique)
         self.normals = np.asarray(normals, float)
         self._k = None
 
-    def normal_n(self, q: np.ndarray, two_g_pa: float, kappa_pa: float) -> np.ndarray:
-        """``(c,)`` each candidate's elastic force along its normal at ``q`` (N)."""
+    def normal_n(self, q: np.ndarray, two_g_pa: float, kappa_pa: float, which: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """``(c,)`` each candidate's elastic force along its normal at ``q`` (N); only of the
+        candidates ``which`` (a mask; the others 0: a candidate off its solid presses nothing, and
+        its voxels are most of the cost)."""
         if self._k is None or self._k[0] != (two_g_pa, kappa_pa):
             self._k = ((two_g_pa, kappa_pa), two_g_pa * self.dev + kappa_pa * self.vol)
+        active = np.ones(self._n_unique, np.bool_)
+        if which is not None:
+            active[:] = False
+            active[self._candidate[np.asarray(which, bool)]] = True
         f = self.frames
-        u = f.settled + f.modes @ q
-        forces = _voxel_forces(u, _rotations(u, f.grads), self.local, self._k[1]).reshape(-1, 8, 3)
         node = np.zeros((self._n_unique, 3))
-        np.add.at(node, self._slot, forces[self._voxel, self._corner])
-        return np.einsum("ck,ck->c", self.normals, node[self._candidate])
+        _node_forces(f.settled, f.modes, np.ascontiguousarray(q, float), self.local, f.grads, self._k[1],
+                     self._slot, active, node)
+        out = np.einsum("ck,ck->c", self.normals, node[self._candidate])
+        return out if which is None else np.where(which, out, 0.0)
 
 
 class ReducedCorotation:
@@ -272,6 +278,61 @@ class ReducedCorotation:
 
 
 @njit(cache=True)
+def _node_forces(settled, modes, q, local, grads, k, slot, active, out):
+    """out[slot[e, a]] += (R_e K_e (R_eᵀ x_e − X_e)) at corner a of each voxel e, for the corners
+    whose node is ``active`` (slot −1: not summed)."""
+    r = q.shape[0]
+    u = np.empty(24)
+    z = np.empty(24)
+    x = np.empty((8, 3))
+    f = np.empty((3, 3))
+    re = np.empty((3, 3))
+    for e in range(modes.shape[0]):
+        wanted = False
+        for a in range(8):
+            if slot[e, a] >= 0 and active[slot[e, a]]:
+                wanted = True
+        if not wanted:
+            continue
+        for i in range(24):
+            acc = settled[e, i]
+            for j in range(r):
+                acc += modes[e, i, j] * q[j]
+            u[i] = acc
+        _centre_gradient(u, grads[e], f)
+        polar_rotation(f, re)
+        _turned_strain(u, local[e], re, x, z)
+        for a in range(8):
+            node = slot[e, a]
+            if node < 0 or not active[node]:
+                continue
+            loc = np.zeros(3)
+            for i in range(3):
+                acc = 0.0
+                for j in range(24):
+                    acc += k[e, 3 * a + i, j] * z[j]
+                loc[i] = acc
+            for i in range(3):
+                out[node, i] += re[i, 0] * loc[0] + re[i, 1] * loc[1] + re[i, 2] * loc[2]
+
+
+@njit(cache=True)
+def _turned_strain(u, local, re, x, z):
+    """z = R_eᵀ x − X_e node by node (x the corners from their centre; ``local`` X_e from its own)."""
+    c = np.zeros(3)
+    for a in range(8):
+        for i in range(3):
+            x[a, i] = local[3 * a + i] + u[3 * a + i]
+            c[i] += x[a, i] / 8.0
+    for a in range(8):
+        for i in range(3):
+            acc = 0.0
+            for j in range(3):
+                acc += re[j, i] * (x[a, j] - c[j])          # (R_eᵀ x)_i
+            z[3 * a + i] = acc - local[3 * a + i]
+
+
+@njit(cache=True)
 def _forces(settled, modes, q, local, grads, dev, vol, two_g, kappa, weights, rot, force):
     """Each sampled voxel's rotation at q into ``rot``; Σ_e w_e V_eᵀ R_e K_e (R_eᵀ x_e − X_e) into ``force``."""
     r = q.shape[0]
@@ -288,17 +349,7 @@ def _forces(settled, modes, q, local, grads, dev, vol, two_g, kappa, weights, ro
         _centre_gradient(u, grads[e], f)
         polar_rotation(f, rot[e])
         re = rot[e]
-        c = np.zeros(3)
-        for a in range(8):
-            for i in range(3):
-                x[a, i] = local[e, 3 * a + i] + u[3 * a + i]
-                c[i] += x[a, i] / 8.0
-        for a in range(8):
-            for i in range(3):
-                acc = 0.0
-                for k in range(3):
-                    acc += re[k, i] * (x[a, k] - c[k])          # (R_eᵀ x)_i
-                z[3 * a + i] = acc - local[e, 3 * a + i]
+        _turned_strain(u, local[e], re, x, z)
         w = weights[e]
         for a in range(8):
             loc = np.zeros(3)
