@@ -281,7 +281,6 @@ class ReducedCorotation:
 def _node_forces(settled, modes, q, local, grads, k, slot, active, out):
     """out[slot[e, a]] += (R_e K_e (R_eᵀ x_e − X_e)) at corner a of each voxel e, for the corners
     whose node is ``active`` (slot −1: not summed)."""
-    r = q.shape[0]
     u = np.empty(24)
     z = np.empty(24)
     x = np.empty((8, 3))
@@ -294,13 +293,7 @@ def _node_forces(settled, modes, q, local, grads, k, slot, active, out):
                 wanted = True
         if not wanted:
             continue
-        for i in range(24):
-            acc = settled[e, i]
-            for j in range(r):
-                acc += modes[e, i, j] * q[j]
-            u[i] = acc
-        _centre_gradient(u, grads[e], f)
-        polar_rotation(f, re)
+        _voxel_at(settled[e], modes[e], q, grads[e], u, f, re)
         _turned_strain(u, local[e], re, x, z)
         for a in range(8):
             node = slot[e, a]
@@ -314,6 +307,18 @@ def _node_forces(settled, modes, q, local, grads, k, slot, active, out):
                 loc[i] = acc
             for i in range(3):
                 out[node, i] += re[i, 0] * loc[0] + re[i, 1] * loc[1] + re[i, 2] * loc[2]
+
+
+@njit(cache=True)
+def _voxel_at(settled, modes, q, grads, u, f, re):
+    """u = settled + modes @ q (a voxel's 24 corner displacements), re its rotation there."""
+    for i in range(24):
+        acc = settled[i]
+        for j in range(q.shape[0]):
+            acc += modes[i, j] * q[j]
+        u[i] = acc
+    _centre_gradient(u, grads, f)
+    polar_rotation(f, re)
 
 
 @njit(cache=True)
@@ -341,14 +346,8 @@ def _forces(settled, modes, q, local, grads, dev, vol, two_g, kappa, weights, ro
     z = np.empty(24)
     f = np.empty((3, 3))
     for e in range(modes.shape[0]):
-        for i in range(24):
-            acc = settled[e, i]
-            for k in range(r):
-                acc += modes[e, i, k] * q[k]
-            u[i] = acc
-        _centre_gradient(u, grads[e], f)
-        polar_rotation(f, rot[e])
         re = rot[e]
+        _voxel_at(settled[e], modes[e], q, grads[e], u, f, re)
         _turned_strain(u, local[e], re, x, z)
         w = weights[e]
         for a in range(8):
@@ -388,13 +387,7 @@ def _rotations_at(settled, modes, q, grads, out):
     u = np.empty(24)
     f = np.empty((3, 3))
     for e in range(modes.shape[0]):
-        for i in range(24):
-            acc = settled[e, i]
-            for k in range(q.shape[0]):
-                acc += modes[e, i, k] * q[k]
-            u[i] = acc
-        _centre_gradient(u, grads[e], f)
-        polar_rotation(f, out[e])
+        _voxel_at(settled[e], modes[e], q, grads[e], u, f, out[e])
 
 
 @njit(cache=True)
