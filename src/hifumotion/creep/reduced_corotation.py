@@ -74,6 +74,16 @@ class VoxelFrames:
         self.settled = np.ascontiguousarray(np.asarray(settled_m, float)[dofs])
         self.grads = np.ascontiguousarray(grads[self.block_of[self.voxels]])
 
+    def elastic_parts(self, matrices, rest_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The voxels' K_dev and K_vol blocks ``(voxels, 24, 24)`` (per unit 2G, per unit κ) and
+        their corners at rest from each one's centre ``(voxels, 24)`` (m), X_e of the force."""
+        m = matrices
+        of = self.block_of[self.voxels]
+        corners = np.asarray(rest_m, float)[m.elements[self.voxels]]
+        return (np.ascontiguousarray(np.concatenate([m.cube.deviatoric[None], m.dev])[of]),
+                np.ascontiguousarray(np.concatenate([m.cube.volumetric[None], m.vol])[of]),
+                np.ascontiguousarray((corners - corners.mean(axis=1, keepdims=True)).reshape(len(of), 24)))
+
     def rotations(self, q: np.ndarray) -> np.ndarray:
         """``(voxels, 3, 3)``: each voxel's R (polar decomposition of F at its centre) at ``q``."""
         out = np.empty((len(self.voxels), 3, 3))
@@ -144,11 +154,7 @@ class CandidateForces:
                  voxels: np.ndarray, nodes: np.ndarray, normals: np.ndarray):
         m = matrices
         self.frames = VoxelFrames(m, node_modes_m, settled_m, voxels)
-        of = self.frames.block_of[self.frames.voxels]
-        self.dev = np.concatenate([m.cube.deviatoric[None], m.dev])[of]
-        self.vol = np.concatenate([m.cube.volumetric[None], m.vol])[of]
-        corners = np.asarray(rest_m, float)[m.elements[self.frames.voxels]]
-        self.local = (corners - corners.mean(axis=1, keepdims=True)).reshape(len(of), 24)
+        self.dev, self.vol, self.local = self.frames.elastic_parts(m, rest_m)
         unique, self._candidate = np.unique(np.asarray(nodes, np.int64), return_inverse=True)
         position = np.full(len(rest_m), -1)
         position[unique] = np.arange(len(unique))
@@ -202,11 +208,7 @@ class ReducedCorotation:
         m = matrices
         n_el, r = len(m.elements), node_modes_m.shape[1]
         every = VoxelFrames(m, node_modes_m, settled_m, np.arange(n_el))
-        of = every.block_of
-        dev = np.concatenate([m.cube.deviatoric[None], m.dev])
-        vol = np.concatenate([m.cube.volumetric[None], m.vol])
-        corners = np.asarray(rest_m, float)[m.elements]
-        local = (corners - corners.mean(axis=1, keepdims=True)).reshape(n_el, 24)   # X_e from its centre
+        dev, vol, local = every.elastic_parts(m, rest_m)
         voxels, self.weights, self.residual = np.arange(n_el), np.ones(n_el), 0.0
         if tolerance > 0 and n_el:
             pick = np.unique(np.linspace(0, max(snapshots.shape[1] - 1, 0), samples).astype(int))
@@ -216,7 +218,7 @@ class ReducedCorotation:
                 u = every.settled + every.modes @ q
                 rot = _rotations(u, every.grads)
                 for blocks in (dev, vol):
-                    f = _voxel_forces(u, rot, local, blocks[of])                  # (voxels, 24)
+                    f = _voxel_forces(u, rot, local, blocks)                      # (voxels, 24)
                     part = np.einsum("eir,ei->re", every.modes, f)                 # (r, voxels)
                     size = np.linalg.norm(part.sum(axis=1))
                     if size > 0:
@@ -225,8 +227,8 @@ class ReducedCorotation:
                 voxels, self.weights, self.residual = greedy_weights(np.vstack(columns), tolerance)
         self.frames = VoxelFrames(m, node_modes_m, settled_m, voxels)
         self.local = np.ascontiguousarray(local[voxels])
-        self.dev = np.ascontiguousarray(dev[of[voxels]])
-        self.vol = np.ascontiguousarray(vol[of[voxels]])
+        self.dev = np.ascontiguousarray(dev[voxels])
+        self.vol = np.ascontiguousarray(vol[voxels])
         self._weighted_modes = self.frames.modes * self.weights[:, None, None]
 
     @property
