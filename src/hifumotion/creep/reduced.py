@@ -450,9 +450,7 @@ class ReducedCreep:
         stats = step_counters(self) if stats is None else stats
         r = self.basis.size
         q = np.zeros(r)
-        stiffness, load, turned = loads.stiffness, loads.load, None
-        if self.corotation is not None:
-            stiffness, load, turned = self._elastic(loads, q)
+        stiffness, load, turned = self._elastic(loads, q)
         for _ in range(1 + (4 * self.settings.rotation_rounds if turned is not None else 0)):
             q = self._solve(stiffness, load + force_n * self.basis.advance_modes_m, stats, np.zeros(r))
             if not self._turned_on(turned, q):
