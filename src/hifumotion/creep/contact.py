@@ -55,6 +55,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from numba import njit
 
 #: a node's status: free, held rigidly (a bonded plane's), or in frictional contact
 FREE, STICK, SLIP = 0, 1, 2
@@ -238,21 +239,19 @@ class ContactSet:
         outward unit normal there: the solid is a cylinder of radius R − r/2 whose face is r behind
         the real one, grown by a ball of radius r — a flat face to R − r/2, a rim rounded at r
         centred on the real one (the face neither shrunk nor grown on average), a side at R + r/2."""
-        a = self.body_frames[self.punch_index, 0]
-        r = float(self.punch.edge_radius_m)
-        along, across, radial = self._in_bar(x_m, advance_m)
-        front = along + r                        # beyond the core's face
-        out = across - self._core_radius_m()     # beyond the core's side
-        rim = (out > 0) & (front > 0)
-        corner = np.hypot(out, front)
-        inside = (out <= 0) & (front <= 0)
-        beside = (out > 0) & (front <= 0)
-        distance = np.where(rim, corner, np.where(beside, out, np.where(inside, np.maximum(front, out), front)))
-        radial_normal = beside | (inside & (out > front))
-        normal = np.where(radial_normal[:, None], radial, a)
-        if rim.any():
-            normal[rim] = (out[rim, None] * radial[rim] + front[rim, None] * a) / corner[rim, None]
-        return distance - r, normal
+        x = np.ascontiguousarray(x_m, float).reshape(-1, 3)
+        distance = np.empty(len(x))
+        normal = np.empty((len(x), 3))
+        _bar_distances(x, *self.bar_geometry(advance_m), distance, normal)
+        return distance, normal
+
+    def bar_geometry(self, advance_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+        """The bar's face centre (m) advanced by ``advance_m``, its axis, a unit vector across it,
+        the rounded core's radius R − r/2 (m) and the rim's radius r (m): :func:`bar_point`'s."""
+        frame = self.body_frames[self.punch_index]
+        a = np.ascontiguousarray(frame[0], float)
+        tip = np.asarray(self.punch.tip_m, float) + advance_m * a
+        return tip, a, np.ascontiguousarray(frame[1], float), self._core_radius_m(), float(self.punch.edge_radius_m)
 
     def under_face(self, u: np.ndarray, advance_m: float) -> tuple[np.ndarray, np.ndarray]:
         """How far (m) the bar must advance along its axis to touch each node (its gap along the
@@ -399,6 +398,39 @@ class ContactSet:
             self.touch(crossing, which[crossing], u, advance_m)
             changed_set = True
         return changed_set
+
+
+@njit(cache=True)
+def bar_point(x0, x1, x2, tip, a, across_unit, core_m, rim_m, normal):
+    """The signed distance (m; negative inside) of the point (x0, x1, x2) (m) to the bar's rounded
+    solid (:meth:`ContactSet.bar_distance`), its outward unit normal into ``normal`` (3,)."""
+    r0, r1, r2 = x0 - tip[0], x1 - tip[1], x2 - tip[2]
+    along = r0 * a[0] + r1 * a[1] + r2 * a[2]
+    l0, l1, l2 = r0 - along * a[0], r1 - along * a[1], r2 - along * a[2]
+    across = np.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+    if across < 1e-300:          # on the axis: any direction across it is radial
+        l0, l1, l2 = across_unit[0], across_unit[1], across_unit[2]
+    else:
+        l0, l1, l2 = l0 / across, l1 / across, l2 / across
+    front = along + rim_m        # beyond the core's face
+    out = across - core_m        # beyond the core's side
+    if out > 0.0 and front > 0.0:                    # the rounded rim
+        corner = np.hypot(out, front)
+        normal[0] = (out * l0 + front * a[0]) / corner
+        normal[1] = (out * l1 + front * a[1]) / corner
+        normal[2] = (out * l2 + front * a[2]) / corner
+        return corner - rim_m
+    if out > 0.0 or (front <= 0.0 and out > front):  # beside, or inside and nearer the side
+        normal[0], normal[1], normal[2] = l0, l1, l2
+        return out - rim_m
+    normal[0], normal[1], normal[2] = a[0], a[1], a[2]   # before the face, or inside and nearer it
+    return front - rim_m
+
+
+@njit(cache=True)
+def _bar_distances(x, tip, a, across_unit, core_m, rim_m, distance, normal):
+    for i in range(x.shape[0]):
+        distance[i] = bar_point(x[i, 0], x[i, 1], x[i, 2], tip, a, across_unit, core_m, rim_m, normal[i])
 
 
 __all__ = ["Plane", "Punch", "ContactSet", "FrictionLinearised", "friction_force", "friction_linearised",

@@ -317,17 +317,17 @@ class ReducedCreep:
         return np.ascontiguousarray(rows[active]), bound[active], bar
 
     def _rows_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The contact rows at ``q`` (``rows @ q₊ ≥ bound``) and which of them hold: every plane's,
-        the bar's linearised there."""
+        """The contact rows that hold at ``q`` (``rows @ q₊ ≥ bound``; every plane's, the bar's
+        linearised there) and their indices among all candidates' rows."""
         if self._bar is None:
-            return self.rows, self.bound, np.ones(len(self.rows), bool)
+            return self.rows, self.bound, np.arange(len(self.rows))
         # a step's friction rounds all solve at its start: the bar's rows are made once a step
         cached = getattr(self, "_rows_cache", None)
         if cached is not None and np.array_equal(cached[0], q):
             return cached[1]
         rows, bound, holds = self._bar.rows_at(q)
-        out = (np.vstack([self.rows, rows]), np.concatenate([self.bound, bound]),
-               np.concatenate([np.ones(len(self.rows), bool), holds]))
+        index = np.concatenate([np.arange(len(self.rows)), len(self.rows) + np.flatnonzero(holds)])
+        out = (np.vstack([self.rows, rows[holds]]), np.concatenate([self.bound, bound[holds]]), index)
         self._rows_cache = (q.copy(), out)
         return out
 
@@ -340,8 +340,7 @@ class ReducedCreep:
         until none is (the result is then the whole problem's)."""
         q = np.linalg.solve(a, rhs)
         tol = self.settings.contact_tolerance * self.dx_m
-        rows, bound, holds = self._rows_at(at)
-        rows, bound = rows[holds], bound[holds]
+        rows, bound, index = self._rows_at(at)
         violated = rows @ q < bound - tol
         if len(rows) == 0 or not violated.any():
             self._pressed = np.zeros(0, np.int64)
@@ -352,7 +351,6 @@ class ReducedCreep:
         y0 = inverse @ rhs
         h_rows = rows @ inverse.T                               # G L⁻ᵀ
         h = bound - h_rows @ y0
-        index = np.flatnonzero(holds)
         pressed = np.isin(index, self._pressed)
         work = violated | pressed
         for _ in range(len(rows)):
@@ -522,12 +520,13 @@ class ReducedCreep:
         mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot, state.q)
         friction = state.friction
         if self.friction is not None:
+            gaps = self.friction.gaps_m(state.q)
             elastic = (None if self._candidate_forces is None else self._candidate_forces.normal_n(
-                state.q, loads.two_g_pa, loads.kappa_pa, self.friction.gaps_m(state.q) <= self.friction.touch_m))
+                state.q, loads.two_g_pa, loads.kappa_pa, gaps <= self.friction.touch_m))
             reactions = self.friction.normal_reactions_n(loads.two_g_pa, loads.kappa_pa, state.q, state.qdot, mu, elastic)
             if bar_force_n is not None and self.settings.friction_balance:
-                reactions = self.friction.balanced(reactions, self.friction.gaps_m(state.q), bar_force_n)
-            friction = self.friction.state(state.q, reactions, state.friction, scale=loads.friction_scale)
+                reactions = self.friction.balanced(reactions, gaps, bar_force_n)
+            friction = self.friction.state(state.q, reactions, state.friction, scale=loads.friction_scale, gaps_m=gaps)
         return ReducedState(state.t_s, state.q, state.qdot, visc, friction)
 
     def particles_mm(self, qs: np.ndarray) -> np.ndarray:

@@ -26,6 +26,9 @@ not go deeper, as the plane rows' rule has it.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
+from hifumotion.creep.contact import bar_point
 
 MM = 1e-3
 
@@ -66,11 +69,38 @@ class ReducedBarRows:
     def rows_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The rows linearised at ``q``: ``(G, h, holds)`` with ``G q₊ ≥ h`` for the candidates
         where ``holds`` (a row that does not vanish)."""
-        distance, normal = self.distances_m(q)
-        rows = np.einsum("nk,nkr->nr", normal, self.modes) - (normal @ self.axis)[:, None] * self.advance_modes_m[None]
-        bound = rows @ q - np.maximum(distance, 0.0)
-        holds = np.abs(rows).max(axis=1) > self._negligible
+        q = np.ascontiguousarray(q, float)
+        n, r = len(self.nodes), len(q)
+        rows, bound, holds = np.empty((n, r)), np.empty(n), np.empty(n, np.bool_)
+        geometry = self.contacts.bar_geometry(self.advance_at_rest_m + float(self.advance_modes_m @ q))
+        _bar_rows(self.settled_m, self.modes, q, self.advance_modes_m, *geometry, self._negligible, rows, bound, holds)
         return rows, bound, holds
+
+
+@njit(cache=True)
+def _bar_rows(settled, modes, q, advance_modes, tip, a, across_unit, core_m, rim_m, negligible, rows, bound, holds):
+    """Each candidate's row ``nᵀ V_i − (a·n) v_s``, its bound ``row·q − max(d, 0)`` and whether it
+    holds (a coefficient above ``negligible``), n and d the bar's normal and distance at ``q``."""
+    r = q.shape[0]
+    normal = np.empty(3)
+    x = np.empty(3)
+    for i in range(settled.shape[0]):
+        for k in range(3):
+            acc = settled[i, k]
+            for j in range(r):
+                acc += modes[i, k, j] * q[j]
+            x[k] = acc
+        distance = bar_point(x[0], x[1], x[2], tip, a, across_unit, core_m, rim_m, normal)
+        axial = normal[0] * a[0] + normal[1] * a[1] + normal[2] * a[2]
+        dot = 0.0
+        largest = 0.0
+        for j in range(r):
+            g = normal[0] * modes[i, 0, j] + normal[1] * modes[i, 1, j] + normal[2] * modes[i, 2, j] - axial * advance_modes[j]
+            rows[i, j] = g
+            dot += g * q[j]
+            largest = max(largest, abs(g))
+        bound[i] = dot - max(distance, 0.0)
+        holds[i] = largest > negligible
 
 
 __all__ = ["ReducedBarRows"]

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from hifumotion.creep.contact import friction_linearised
 
@@ -166,8 +167,7 @@ class ReducedFriction:
         gap = self.gap0_m + self.gap_modes @ q
         if self._face is not None:
             where, lateral, modes, radius = self._face
-            across = np.linalg.norm(lateral + modes @ q, axis=1)
-            gap[where] = np.where(across <= radius, gap[where], np.inf)
+            _off_face(lateral, modes, np.ascontiguousarray(q, float), radius, gap[where])
         return gap
 
     def normal_reactions_n(self, two_g: float, kappa: float, q: np.ndarray, qdot: np.ndarray,
@@ -205,26 +205,20 @@ class ReducedFriction:
         return out
 
     def state(self, q: np.ndarray, reactions_n: np.ndarray, previous: FrictionState | None,
-              slide: bool = True, scale: float = 1.0) -> FrictionState:
+              slide: bool = True, scale: float = 1.0, gaps_m: np.ndarray | None = None) -> FrictionState:
         """The friction at ``q`` with the candidates' ``reactions_n``: limits μ_f λ_n of the nodes
         that press, a new contact anchored where it is, one that stops pressing let go; ``slide``
         (a step's end): an anchor farther than ε dragged to ε. ``scale``: this run's μ_f over the
-        one the model was made at (the candidates and their modes do not depend on it)."""
+        one the model was made at (the candidates and their modes do not depend on it).
+        ``gaps_m``: :meth:`gaps_m` at ``q``, when the caller has it."""
         position = (self._tangent_flat @ q).reshape(-1, 2)                # (m, 2)
-        pressing = (reactions_n > 0) & (self.gaps_m(q) <= self.touch_m)
-        limit = np.where(pressing, scale * self.coefficient * reactions_n, 0.0)
-        if previous is None:
-            anchor = position.copy()
-        else:
-            anchor = previous.anchor_t_m.copy()
-            was = previous.limit_n > 0
-            anchor[~was] = position[~was]
-            if slide:
-                d = position - anchor
-                size = np.linalg.norm(d, axis=1)
-                slid = size > self.stick_m
-                anchor[slid] = position[slid] - self.stick_m * d[slid] / size[slid, None]
-        anchor[~pressing] = position[~pressing]
+        gaps = self.gaps_m(q) if gaps_m is None else gaps_m
+        anchor = np.empty_like(position)
+        limit = np.empty(len(position))
+        fresh = previous is None
+        _friction_state(position, np.asarray(reactions_n, float), gaps, self.touch_m, scale * self.coefficient,
+                        position if fresh else previous.anchor_t_m, limit if fresh else previous.limit_n, fresh,
+                        slide, self.stick_m, anchor, limit)
         return FrictionState(anchor, limit)
 
     def linearised(self, state: FrictionState, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
@@ -253,6 +247,43 @@ class ReducedFriction:
         d = np.einsum("par,r->pa", self.tangent_modes[nodes], q) - law.anchor_t
         limit = state.limit_n[nodes]
         return float(np.max(law.error_n(d, limit, self.stick_m) / limit))
+
+
+@njit(cache=True)
+def _off_face(lateral, modes, q, radius, gap):
+    """``gap`` set to +inf for the bar-face candidates whose distance from the bar's axis at ``q``
+    (``lateral + modes @ q``, m) is beyond the face's ``radius``."""
+    for i in range(lateral.shape[0]):
+        size = 0.0
+        for k in range(3):
+            x = lateral[i, k]
+            for j in range(q.shape[0]):
+                x += modes[i, k, j] * q[j]
+            size += x * x
+        if np.sqrt(size) > radius:
+            gap[i] = np.inf
+
+
+@njit(cache=True)
+def _friction_state(position, reactions, gaps, touch, coefficient, previous_anchor, previous_limit, fresh, slide,
+                    stick, anchor, limit):
+    """:meth:`ReducedFriction.state` node by node: a pressing node's limit μ_f λ_n; its anchor kept
+    from the last state if it pressed then (dragged to within ``stick`` of where it is, with
+    ``slide``), else where it is; a node that does not press is anchored where it is."""
+    for i in range(position.shape[0]):
+        pressing = reactions[i] > 0.0 and gaps[i] <= touch
+        limit_i = coefficient[i] * reactions[i] if pressing else 0.0
+        x0, x1 = position[i, 0], position[i, 1]
+        a0, a1 = x0, x1
+        if pressing and not fresh and previous_limit[i] > 0.0:
+            a0, a1 = previous_anchor[i, 0], previous_anchor[i, 1]
+            if slide:
+                d0, d1 = x0 - a0, x1 - a1
+                size = np.sqrt(d0 * d0 + d1 * d1)
+                if size > stick:
+                    a0, a1 = x0 - stick * d0 / size, x1 - stick * d1 / size
+        anchor[i, 0], anchor[i, 1] = a0, a1
+        limit[i] = limit_i
 
 
 __all__ = ["FrictionState", "ReducedFriction"]
