@@ -280,6 +280,77 @@ def test_the_friction_as_a_fifth_coordinate_is_recovered_and_its_design_spans_it
     assert SearchSpace().parameters(SearchSpace().theta(truth)).friction is None
 
 
+def test_a_reduced_models_friction_trust_region_is_cut_by_the_space():
+    from hifumotion.estimation.space import FRICTION_BOUNDS
+
+    space = SearchSpace(friction=FRICTION_BOUNDS)
+    k = Parameters(0.25, 9000.0, 0.45, 2e5, 0.5, friction=0.1)
+    near = space.friction_within(space.theta(k), 1.25)
+    assert near.friction == pytest.approx((0.08, 0.125))
+    assert (near.youngs_pa, near.poisson, near.beta1, near.beta2) == (space.youngs_pa, space.poisson, space.beta1, space.beta2)
+    assert space.friction_within(space.theta(k.replaced(friction=0.9)), 1.25).friction == pytest.approx((0.72, 1.0))
+    assert SearchSpace().friction_within(SearchSpace().theta(k), 1.25) == SearchSpace()
+
+
+class ReducedFrictionEvaluator(FrictionEvaluator):
+    """A reduced model of the friction evaluator, made around a centre: its friction term is the
+    truth's within a factor 1.3 of the μ_f it was made at, and beyond it fades into a false one
+    that holds a stick at μ_f 0.9 for a slide (the reduced model that slides on at any μ_f,
+    docs/decisions.md, issue 41, session 35)."""
+
+    ACCURATE, FALSE_MU = np.log(1.3), 0.9
+
+    def __init__(self, truth: Parameters, centre_mu: float):
+        super().__init__(truth)
+        self.centre = np.log(centre_mu)
+        self.made = 0
+
+    def reduce_around(self, theta, upto=None) -> float:
+        self.centre = float(theta[4])
+        self.model_tag = f"reduced@{self.centre:.9g}"
+        self.made += 1
+        return 0.0
+
+    def _submit(self, ks, n):
+        out = []
+        for k in ks:
+            theta = self.space.theta(k)
+            d = theta - self.truth
+            beyond = max(abs(theta[4] - self.centre) - self.ACCURATE, 0.0)
+            g = np.exp(-(beyond / 0.1) ** 2)
+            friction = g * d[4] + (1 - g) * (theta[4] - np.log(self.FALSE_MU))
+            r = sum(p * v for p, v in zip(self.patterns, (d[0], d[1] * 10, d[2] * 0.3, friction)))
+            out.append({"residuals_mm": r[:n], "seconds": 0.0, "steps": 0})
+            self.runs += 1
+        return out
+
+
+def test_the_reduced_search_keeps_the_friction_where_its_model_holds_and_remakes_it_there():
+    """A reduced model made at μ_f 0.3 for a truth at 0.12 holds only near 0.3 (and beyond it
+    prefers a false 0.9): searched within its trust region and made again where each search stops
+    at that region's edge, the fit reaches the truth; searched free, it is misled."""
+    from hifumotion.estimation.calibrate import _reduced_search
+    from hifumotion.estimation.settings import CalibrationSettings
+
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
+    start = np.array([np.log(9000.0), 0.43, np.log(2e5), 0.5, np.log(0.3)])
+    for trust, reaches_truth in ((1.25, True), (100.0, False)):
+        ev = ReducedFrictionEvaluator(truth, centre_mu=0.3)
+        s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=trust, reduced_rounds=8)
+        centres, made = [start], []
+        _, _, theta = _reduced_search(ev, s, start, centres, made)
+        mu = float(np.exp(theta[4]))
+        assert ev.space.friction is not None       # the whole space is back after the search
+        if reaches_truth:
+            assert mu == pytest.approx(0.12, rel=0.1)       # (the estimator's ftol: 0.129)
+            # each model made again where the last search stopped, μ_f a factor ≤ 1.25 from the last
+            assert ev.made == len(made) == len(centres) - 1 >= 3
+            steps = np.abs(np.diff([c[4] for c in centres]))
+            assert np.all(steps <= np.log(1.25) + 1e-6)
+        else:
+            assert abs(mu / 0.12 - 1) > 0.3 and ev.made == 0      # misled beyond the model's reach
+
+
 def test_a_fitted_friction_reaches_the_models_scene():
     from hifumotion.estimation.model import ModelSpec, scene_for
     from hifumotion.particles.scene import Scene

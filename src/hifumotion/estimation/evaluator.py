@@ -255,6 +255,16 @@ class Evaluator:
             self.run_seconds += other.run_seconds
             other._client = other._remote = None
 
+    @contextmanager
+    def within(self, space: SearchSpace):
+        """Inside the block the evaluations and searches see ``space`` (narrower bounds: a reduced
+        model's trust region); the runs and their cache are the same."""
+        whole, self.space = self.space, space
+        try:
+            yield self
+        finally:
+            self.space = whole
+
     def reduce_around(self, theta: np.ndarray, upto: int | None = None) -> float:
         """Make the spec's reduced model around ``θ`` (its snapshot runs in parallel on the cluster,
         the model here), send it to the workers and run on it from now on; seconds taken.

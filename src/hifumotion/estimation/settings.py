@@ -86,6 +86,10 @@ class CalibrationSettings(ConfigModel):
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     search_integrator: Literal["implicit", "reduced"] = Field(
         "implicit", description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre, again around its best start, then the final model's own around the search's optimum; docs/decisions.md, issue 39)")
+    reduced_friction_trust: float = Field(
+        1.25, gt=1.0, le=100.0, description="with the reduced search and a fitted friction: each search on a reduced model keeps μ_f within this factor of the μ_f the model was made at (two sliding snapshots do not show a stick far above it: docs/decisions.md, issue 41, session 35)")
+    reduced_rounds: int = Field(
+        3, ge=0, le=20, description="with the reduced search and a fitted friction: how many more times the reduced model is made again around a fit whose μ_f stopped at the edge of that trust region, and searched from there")
     full_model_check: bool = Field(
         True, description="with the reduced search: one run of the full final model at the fit, its residual recorded beside the reduced model's")
     max_evaluations: int = Field(8, ge=1, le=10_000, description="least squares: residual evaluations (each with a Jacobian)")
@@ -102,7 +106,7 @@ class CalibrationSettings(ConfigModel):
     fit_friction: bool | None = Field(
         None, description="fit the friction of the floor and the bar's face (ln μ_f, 0.02 … 1) as a fifth "
                           "coordinate; unset: when the bar is driven (its slide is set by the friction), "
-                          "otherwise held at [estimation.model] friction. Needs search_integrator = implicit")
+                          "otherwise held at [estimation.model] friction")
     objective: Literal["auto", "contour", "contour+displacement"] = Field(
         "auto", description="what the fit matches: the observed contours (the paper's S_t), or also the speckle-tracked displacement of the contour points; auto: the displacement too where speckle tracking observed it")
     quality_weights: bool = Field(

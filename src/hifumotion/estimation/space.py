@@ -26,7 +26,7 @@ F/E and β1/E, and :func:`~hifumotion.estimation.fit.degeneracy` shows it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -81,6 +81,15 @@ class SearchSpace:
                 raise ValueError("the space fits the friction: the parameters must carry one")
             base.append(np.log(k.friction))
         return np.array(base)
+
+    def friction_within(self, theta, factor: float) -> "SearchSpace":
+        """This space with μ_f kept within ``factor`` of ``theta``'s (and within its own bounds):
+        the trust region of a reduced model made at ``theta`` (its friction's modes hold near it);
+        a space without the friction is returned as it is."""
+        if not self.friction:
+            return self
+        mu = float(np.exp(np.clip(theta[4], self.lower[4], self.upper[4])))
+        return replace(self, friction=(max(self.friction[0], mu / factor), min(self.friction[1], mu * factor)))
 
     def initial_design(self) -> list[np.ndarray]:
         """A small spread of starts (E × β1 at mid ν, β2), data-free: the best one seeds the search."""
