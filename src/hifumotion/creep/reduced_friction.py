@@ -167,6 +167,7 @@ class ReducedFriction:
         gap = self.gap0_m + self.gap_modes @ q
         if self._face is not None:
             where, lateral, modes, radius = self._face
+            # ``where`` is a slice (the face's candidates are contiguous): gap[where] is a view, set in place
             _off_face(lateral, modes, np.ascontiguousarray(q, float), radius, gap[where])
         return gap
 
