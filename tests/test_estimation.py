@@ -305,11 +305,16 @@ class ReducedFrictionEvaluator(FrictionEvaluator):
         self.centre = np.log(centre_mu)
         self.made = 0
 
-    def reduce_around(self, theta, upto=None) -> float:
+    def reduce_around(self, theta, upto=None, new_runs=True) -> float:
         self.centre = float(theta[4])
         self.model_tag = f"reduced@{self.centre:.9g}"
         self.made += 1
         return 0.0
+
+    def full_run(self, theta, upto=None):
+        """The full model: the friction evaluator's exact residuals."""
+        self.full_runs = getattr(self, "full_runs", 0) + 1
+        return FrictionEvaluator._submit(self, [self.space.parameters(theta)], len(self.data.frames))[0]["residuals_mm"]
 
     def _submit(self, ks, n):
         out = []
@@ -328,27 +333,40 @@ class ReducedFrictionEvaluator(FrictionEvaluator):
 def test_the_reduced_search_keeps_the_friction_where_its_model_holds_and_remakes_it_there():
     """A reduced model made at μ_f 0.3 for a truth at 0.12 holds only near 0.3 (and beyond it
     prefers a false 0.9): searched within its trust region and made again where each search stops
-    at that region's edge, the fit reaches the truth; searched free, it is misled."""
+    at that region's edge, the fit reaches the truth; searched free and unchecked, it is misled;
+    searched free but checked by the full model, the check sees the false fit and the model made
+    again there leads on to the truth."""
     from hifumotion.estimation.calibrate import _reduced_search
     from hifumotion.estimation.settings import CalibrationSettings
 
     truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
     start = np.array([np.log(9000.0), 0.43, np.log(2e5), 0.5, np.log(0.3)])
-    for trust, reaches_truth in ((1.25, True), (100.0, False)):
+    for trust, checked, reaches_truth in ((1.25, True, True), (1.25, False, True), (100.0, False, False),
+                                          (100.0, True, True)):
         ev = ReducedFrictionEvaluator(truth, centre_mu=0.3)
-        s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=trust, reduced_rounds=8)
-        centres, made = [start], []
-        _, _, theta = _reduced_search(ev, s, start, centres, made)
+        s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=trust, reduced_rounds=8,
+                                full_model_check=checked)
+        centres, made, checks = [start], [], []
+        _, _, theta = _reduced_search(ev, s, start, centres, made, checks)
         mu = float(np.exp(theta[4]))
         assert ev.space.friction is not None       # the whole space is back after the search
+        assert len(checks) == (ev.made + 1 if checked else 0) == getattr(ev, "full_runs", 0)
         if reaches_truth:
             assert mu == pytest.approx(0.12, rel=0.1)       # (the estimator's ftol: 0.129)
+        else:
+            assert abs(mu / 0.12 - 1) > 0.3 and ev.made == 0      # misled beyond the model's reach
+        if trust < 2:
             # each model made again where the last search stopped, μ_f a factor ≤ 1.25 from the last
             assert ev.made == len(made) == len(centres) - 1 >= 3
             steps = np.abs(np.diff([c[4] for c in centres]))
             assert np.all(steps <= np.log(1.25) + 1e-6)
-        else:
-            assert abs(mu / 0.12 - 1) > 0.3 and ev.made == 0      # misled beyond the model's reach
+        if checked:
+            # the last check is the fit's: the full model and the reduced one agree there
+            assert checks[-1]["agrees"] and np.array_equal(checks[-1]["theta"], theta)
+            assert checks[-1]["cost_full_model_mm"] == pytest.approx(checks[-1]["cost_reduced_model_mm"], rel=1e-9)
+        if checked and trust > 2:
+            # free, the first fit was misled, as unchecked; the check found it out
+            assert not checks[0]["agrees"] and abs(np.exp(checks[0]["theta"][4]) / 0.12 - 1) > 0.3
 
 
 def test_a_fitted_friction_reaches_the_models_scene():
@@ -629,12 +647,20 @@ def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path
     assert (len(cal.spec.tissue_mm) == len(cal.search_spec.tissue_mm)) == (final_particles == 150)
     assert cal.spec.settings.creep.stick_mm == spec.settings.creep.stick_mm == 0.02
     assert cal.search_spec.settings.integrator == "reduced" and cal.search_spec.settings.creep.stick_mm == 0.02
-    # the reduced search: the search model's around the design's centre and its best start, then
-    # the final model's around the first optimum, and the full final model run once at the fit
-    assert len(cal.mapped["reduced_model_centres"]) == 3 and cal.timings_s["reduced_model_s"] > 0
-    assert len(cal.timings_s["reductions"]) == 3 and all(r["snapshot_runs_s"] > 0 for r in cal.timings_s["reductions"])
+    # the reduced search: the search model's around the design's centre (two snapshot runs) and
+    # its best start (from those and the full run there), again where a check disagrees, then,
+    # if the final model is finer, the final model's own around the first optimum (two runs)
+    centres, reductions = cal.mapped["reduced_model_centres"], cal.timings_s["reductions"]
+    assert len(centres) == len(reductions) >= (3 if final_particles == 300 else 2)
+    assert cal.timings_s["reduced_model_s"] > 0
+    assert reductions[0]["snapshots"] == 2 and reductions[1]["snapshots"] == 3
+    if final_particles == 300:
+        second = [r for r in reductions if r["snapshots"] == 2]
+        assert len(second) == 2 and reductions.index(second[1]) > 1
+    # the fit's check: the full model run at the fit, among every check the search made
     check = cal.mapped["full_model_check"]
     assert check["cost_full_model_mm"] > 0 and check["cost_reduced_model_mm"] > 0
+    assert check["cost_full_model_mm"] == min(c["cost_full_model_mm"] for c in check["rounds"])
     assert k.as_dict() == pytest.approx(cal.parameters.as_dict(), rel=1e-9)
     # the same mesh: the loaded model's voxels conform to the reconstructed surface as the fitted one's
     assert spec.voxels().nodes_mm.shape == cal.spec.voxels().nodes_mm.shape

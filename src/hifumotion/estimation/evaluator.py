@@ -73,6 +73,16 @@ def forward_residuals(spec: ModelSpec, data: TrainingData, k: Parameters, upto: 
     return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps}
 
 
+def full_run_task(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int, threads: int | None = 1) -> dict:
+    """One run of the full model (a Dask task) whose nodes are kept: the residuals (mm) of the
+    first ``upto`` training frames, and the run as a reduced model's snapshot (``"snapshot"``)."""
+    _use_threads(threads)
+    snapshots: list = []
+    run = run_model(spec, k, int(data.frames[upto - 1]), snapshots=snapshots)
+    r = residuals_mm(run.points_mm, data, upto, run.bar_centre_mm)
+    return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps, "snapshot": snapshots[0]}
+
+
 def snapshot_task(spec: ModelSpec, scene, threads: int | None = 1):
     """One snapshot run of the spec's reduced model (a Dask task; :meth:`~.model.ModelSpec.snapshot_scenes`)."""
     from hifumotion.creep.scene import snapshot_run
@@ -166,6 +176,9 @@ class Evaluator:
         # θ its modes were made around (its runs differ from another reduced model's)
         self.model_tag = ""
         self.reductions: list[dict] = []   # each reduce_around's timings (s)
+        # the full runs whose nodes were kept (reduce_around's and full_run's), newest first: every
+        # reduced model of this spec is made from all of them
+        self.snapshots: list = []
         if self.log_path is not None and self.log_path.is_file():
             self._read_log()
 
@@ -265,10 +278,13 @@ class Evaluator:
         finally:
             self.space = whole
 
-    def reduce_around(self, theta: np.ndarray, upto: int | None = None) -> float:
+    def reduce_around(self, theta: np.ndarray, upto: int | None = None, new_runs: bool = True) -> float:
         """Make the spec's reduced model around ``θ`` (its snapshot runs in parallel on the cluster,
         the model here), send it to the workers and run on it from now on; seconds taken.
-        Nothing to do (0 s) unless the spec's integrator is ``"reduced"``."""
+        Its modes are those of every full run kept so far (:attr:`snapshots`) and, with
+        ``new_runs``, of the spec's snapshot scenes at ``θ`` run now; without, ``θ``'s own run must
+        be among the kept ones already (:meth:`full_run`). Nothing to do (0 s) unless the spec's
+        integrator is ``"reduced"``."""
         import time
 
         if self.spec.settings.integrator != "reduced":
@@ -278,24 +294,59 @@ class Evaluator:
         last = int(self.data.frames[n - 1])
         theta = np.clip(np.asarray(theta, float), self.space.lower, self.space.upper)
         k = self.space.parameters(theta)
-        scenes = self.spec.snapshot_scenes(k, last)
-        threads = max(1, self._cores // len(scenes))
-        futures = [self._client.submit(snapshot_task, self._remote[0], scene, threads, pure=False) for scene in scenes]
-        try:
-            runs = self._client.gather(futures)
-        except InputError:
-            raise
-        except Exception as exc:
-            raise CalibrationFailed(f"the reduced model's snapshot runs at {k} failed ({brief(exc)})") from None
+        runs = []
+        if new_runs:
+            scenes = self.spec.snapshot_scenes(k, last)
+            threads = max(1, self._cores // len(scenes))
+            futures = [self._client.submit(snapshot_task, self._remote[0], scene, threads, pure=False)
+                       for scene in scenes]
+            try:
+                runs = self._client.gather(futures)
+            except InputError:
+                raise
+            except Exception as exc:
+                raise CalibrationFailed(f"the reduced model's snapshot runs at {k} failed ({brief(exc)})") from None
+        elif not self.snapshots:
+            raise RuntimeError("a reduced model without new runs needs a kept full run (full_run)")
+        self.snapshots = list(runs) + self.snapshots
         ran = time.perf_counter()
-        self.spec.adopt_reduced(k, last, runs)
+        self.spec.adopt_reduced(k, last, self.snapshots)
         made = time.perf_counter()
         self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
         self.model_tag = "reduced@" + ",".join(f"{x:.9g}" for x in theta)
         done = time.perf_counter()
         self.reductions.append({"snapshot_runs_s": ran - started, "model_s": made - ran, "sent_s": done - made,
-                                "snapshot_run_s": [float(r.stats.get("seconds", 0.0)) for r in runs]})
+                                "snapshot_run_s": [float(r.stats.get("seconds", 0.0)) for r in runs],
+                                "snapshots": len(self.snapshots),
+                                "modes": int(self.spec._reduced[0].basis.size)})
         return done - started
+
+    def full_run(self, theta: np.ndarray, upto: int | None = None) -> np.ndarray:
+        """Residuals (mm) of one run of the full model at ``θ`` on all the cluster's cores (uncached,
+        logged as model ``"full"``); its nodes are kept (:attr:`snapshots`) for the next
+        reduced model. A run that fails gives :data:`FAILED_RESIDUAL_MM` everywhere."""
+        n = len(self.data.frames) if upto is None else int(upto)
+        theta = np.clip(np.asarray(theta, float), self.space.lower, self.space.upper)
+        k = self.space.parameters(theta)
+        future = self._client.submit(full_run_task, self._remote[0], self._remote[1], k, n, self._cores, pure=False)
+        try:
+            result = future.result()
+            self.snapshots.insert(0, result.pop("snapshot"))
+        except InputError:
+            raise
+        except Exception as exc:
+            result = {"residuals_mm": np.full((n, self.data.width(len(self.spec.points_mm))), FAILED_RESIDUAL_MM),
+                      "seconds": 0.0, "steps": 0, "error": brief(exc)}
+            self.failed += 1
+        result["residuals_mm"] = np.asarray(result["residuals_mm"], float)
+        tag, self.model_tag = self.model_tag, "full"
+        try:
+            self._log(theta, n, result)
+        finally:
+            self.model_tag = tag
+        self.runs += 1
+        self.run_seconds += float(result["seconds"])
+        return result["residuals_mm"]
 
     # -- evaluation -----------------------------------------------------------
     def residuals(self, thetas: Iterable[np.ndarray], upto: int | None = None) -> list[np.ndarray]:

@@ -244,12 +244,13 @@ class ForwardModel(Protocol):
     def __call__(self, spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int): ...
 
 
-def _implicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
-    """The fast path (:mod:`hifumotion.creep`) with ``settings.creep``."""
+def _implicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int, keep: list | None = None):
+    """The fast path (:mod:`hifumotion.creep`) with ``settings.creep`` (``keep``: its
+    :class:`~hifumotion.creep.integrate.CreepResult`, nodes and all, appended there)."""
     from hifumotion.creep.scene import simulate_creep
 
     return simulate_creep(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3), mesh=spec.voxels(),
-                          settings=spec.settings.creep)
+                          settings=spec.settings.creep, keep=keep)
 
 
 def _explicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
@@ -273,10 +274,14 @@ FORWARD_MODELS: dict[str, ForwardModel] = {"implicit": _implicit, "explicit": _e
 assert tuple(FORWARD_MODELS) == INTEGRATORS, "every integrator the settings accept has a forward model"
 
 
-def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -> ModelRun:
+def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), snapshots: list | None = None
+              ) -> ModelRun:
     """Simulate frames 0 … ``last_frame`` with ``k``; the points A at every frame.
 
     ``keep_frames``: frames whose tissue particles are returned as well (for masks).
+    ``snapshots``: a list to which the run appends its nodes' motion (a reduced model's
+    snapshot, :func:`~hifumotion.creep.scene.reduced_from_runs`); the run is then of the full
+    fast path whatever the spec's integrator — the full model that its reduced model reduces.
     Raises :class:`~hifumotion.errors.InputError` for parameters outside the model's
     validity (ν ≥ 0.5, E ≤ 0 …).
     """
@@ -286,7 +291,10 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=()) -
         raise InputError(f"parameters outside the model's range: {k}", "parameters")
     t0 = time.perf_counter()
     scene = scene_for(spec, k, last_frame)
-    sim = FORWARD_MODELS[spec.settings.integrator](spec, scene, k, last_frame)
+    if snapshots is not None:
+        sim = _implicit(spec, scene, k, last_frame, keep=snapshots)
+    else:
+        sim = FORWARD_MODELS[spec.settings.integrator](spec, scene, k, last_frame)
     rest = sim.tissue_mm[0]
     frames = np.arange(len(sim.times_s))
     # the points A are material points: followed with the particles near them at frame 0

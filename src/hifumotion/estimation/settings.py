@@ -89,9 +89,11 @@ class CalibrationSettings(ConfigModel):
     reduced_friction_trust: float = Field(
         1.25, gt=1.0, le=100.0, description="with the reduced search and a fitted friction: each search on a reduced model keeps μ_f within this factor of the μ_f the model was made at (two sliding snapshots do not show a stick far above it: docs/decisions.md, issue 41, session 35)")
     reduced_rounds: int = Field(
-        3, ge=0, le=20, description="with the reduced search and a fitted friction: how many more times the reduced model is made again around a fit whose μ_f stopped at the edge of that trust region, and searched from there")
+        3, ge=0, le=20, description="with the reduced search: how many more times the reduced model is made again around a fit where the full model disagrees with it (or whose μ_f stopped at the edge of the trust region), and searched from there")
+    reduced_agreement: float = Field(
+        1.1, gt=1.0, le=10.0, description="with the reduced search: the reduced model holds at a fit where its training cost and the full model's are within this factor of each other")
     full_model_check: bool = Field(
-        True, description="with the reduced search: one run of the full final model at the fit, its residual recorded beside the reduced model's")
+        True, description="with the reduced search: each fit checked by one run of the full model, which becomes a snapshot of the model made again where the two disagree; the check's residuals recorded beside the reduced model's")
     max_evaluations: int = Field(8, ge=1, le=10_000, description="least squares: residual evaluations (each with a Jacobian)")
     cma_generations: int = Field(12, ge=1, le=10_000, description="CMA-ES: generations")
     threshold_mm_per_point: float | None = Field(
