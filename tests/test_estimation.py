@@ -311,10 +311,11 @@ class ReducedFrictionEvaluator(FrictionEvaluator):
         self.made += 1
         return 0.0
 
-    def full_run(self, theta, upto=None):
+    def full_runs(self, thetas, upto=None):
         """The full model: the friction evaluator's exact residuals."""
-        self.full_runs = getattr(self, "full_runs", 0) + 1
-        return FrictionEvaluator._submit(self, [self.space.parameters(theta)], len(self.data.frames))[0]["residuals_mm"]
+        self.full = getattr(self, "full", 0) + len(thetas)
+        return [r["residuals_mm"] for r in FrictionEvaluator._submit(self, [self.space.parameters(t) for t in thetas],
+                                                                    len(self.data.frames))]
 
     def _submit(self, ks, n):
         out = []
@@ -350,7 +351,7 @@ def test_the_reduced_search_keeps_the_friction_where_its_model_holds_and_remakes
         _, _, theta = _reduced_search(ev, s, start, centres, made, checks)
         mu = float(np.exp(theta[4]))
         assert ev.space.friction is not None       # the whole space is back after the search
-        assert len(checks) == (ev.made + 1 if checked else 0) == getattr(ev, "full_runs", 0)
+        assert len(checks) == (ev.made + 1 if checked else 0) == getattr(ev, "full", 0)
         if reaches_truth:
             assert mu == pytest.approx(0.12, rel=0.1)       # (the estimator's ftol: 0.129)
         else:
@@ -367,6 +368,31 @@ def test_the_reduced_search_keeps_the_friction_where_its_model_holds_and_remakes
         if checked and trust > 2:
             # free, the first fit was misled, as unchecked; the check found it out
             assert not checks[0]["agrees"] and abs(np.exp(checks[0]["theta"][4]) / 0.12 - 1) > 0.3
+
+
+def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
+    """Started at the truth on a reduced model that is false there (made at μ_f 0.3, searched
+    free, one round): the search walks to the false friction; the full model fits that fit worse
+    than the start, so the start is what the search returns — and the design's starts are the best
+    of each friction level."""
+    from hifumotion.estimation.calibrate import _checks, _design_starts, _reduced_search
+    from hifumotion.estimation.settings import CalibrationSettings
+
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
+    ev = ReducedFrictionEvaluator(truth, centre_mu=0.3)
+    s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=0)
+    at_truth = ev.space.theta(truth)
+    start, = _checks(ev, [at_truth], s)
+    assert start["cost_full_model_mm"] == pytest.approx(0.0, abs=1e-9) and not start["agrees"]
+    checks = []
+    fit, _, theta = _reduced_search(ev, s, at_truth, [at_truth], [], checks, start)
+    assert len(checks) == 1 and checks[0]["cost_full_model_mm"] > 1.0       # the fit the search found
+    assert np.array_equal(theta, at_truth) and fit.method == "design"
+    design = [(5.0, [1.0, 0.45, 2.0, 0.5, -2.5]), (3.0, [2.0, 0.45, 2.0, 0.5, -1.4]),
+              (4.0, [3.0, 0.45, 2.0, 0.5, -2.5]), (1.0, [4.0, 0.45, 2.0, 0.5, -1.4])]
+    starts = _design_starts(design, ev.space)
+    assert [list(x) for x in starts] == [design[3][1], design[2][1]]
+    assert [list(x) for x in _design_starts([(c, d[:4]) for c, d in design], SearchSpace())] == [design[3][1][:4]]
 
 
 def test_a_fitted_friction_reaches_the_models_scene():

@@ -173,16 +173,21 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             centres.append(np.mean(space.initial_design(), axis=0))
             timings["reduced_models_s"] = [ev.reduce_around(centres[-1])]
         theta0, design = fitting.initial_guess(ev)
+        start = None
         if reduced:
-            # the design's best start may be a factor 4 from the centre: the modes again around it,
-            # so that the first search starts where its model is accurate — with the full check, from
-            # the full model's run there (which tells whether the centre's model held) and the kept ones
-            centres.append(theta0)
+            # the design's best start may be a factor 4 from the centre, where the centre's model may
+            # not hold (a reduced model slides on where the full one sticks): the full model at the
+            # best start of each of the design's friction levels (one run each, in parallel) picks
+            # the start, and the model is made again around it from those runs and the centre's
             if s.full_model_check:
-                mapped["start_check"] = _summary(_check(ev, theta0, s))
+                starts = _checks(ev, _design_starts(design, space), s)
+                mapped["start_checks"] = [_summary(c) for c in starts]
+                start = min(starts, key=lambda c: c["cost_full_model_mm"])
+                theta0 = start["theta"]
+            centres.append(theta0)
             timings["reduced_models_s"].append(ev.reduce_around(theta0, new_runs=not s.full_model_check))
-        fit_result, table1, theta = (_reduced_search(ev, s, theta0, centres, timings["reduced_models_s"], checks)
-                                     if reduced else _search(ev, s, theta0))
+        fit_result, table1, theta = (_reduced_search(ev, s, theta0, centres, timings["reduced_models_s"], checks,
+                                                     start) if reduced else _search(ev, s, theta0))
         fit_spec = final
         # the search model was coarser than the final one: a second pass on the final model's own
         second_pass = reduced and search_settings.tissue_particles < s.model.tissue_particles
@@ -214,12 +219,13 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             if reduced and s.full_model_check:
                 # the full model at the fit (the check the search ended with): its residual beside
                 # the reduced model's (parameters.json), and every check of the search
-                check = next(c for c in reversed(checks) if np.array_equal(c["theta"], theta))
-                mapped["full_model_check"] = {key: value for key, value in check.items() if key != "theta"}
+                pool = checks + ([start] if start is not None and not second_pass else [])
+                check = next(c for c in reversed(pool) if np.array_equal(c["theta"], theta))
+                mapped["full_model_check"] = {key: value for key, value in check.items() if key not in ("theta", "r_reduced")}
                 mapped["full_model_check"]["rounds"] = [_summary(c) for c in checks]
                 if not check["agrees"]:
-                    log.warning("the full model fits the training frames %.2f× as well as the reduced model at the "
-                                "fit (%.1f against %.1f mm): the reduced model does not hold there; calibrate with "
+                    log.warning("the full model's training cost at the fit is %.2f× the reduced model's (%.1f against "
+                                "%.1f mm): the reduced model does not hold there; calibrate with "
                                 "search_integrator = implicit", check["cost_full_model_mm"] / check["cost_reduced_model_mm"],
                                 check["cost_full_model_mm"], check["cost_reduced_model_mm"])
 
@@ -269,14 +275,18 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
 
 
 def _reduced_search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray, centres: list, made_s: list,
-                    checks: list):
+                    checks: list, start: dict | None = None):
     """:func:`_search` on ``ev``'s reduced model, made at ``centres[-1]``, checked by the full model.
 
-    With ``s.full_model_check`` each search's fit is run once on the full model (:func:`_check`,
-    appended to ``checks``). Where the two disagree the reduced model is made again around the fit
-    — its modes now including that run (a greedy enrichment of the snapshots, as in trust-region
-    POD: Arian, Fahl & Sachs 2000) — and searched again from there, ``s.reduced_rounds`` times at
-    most; of the fits checked, the one the full model fits best is returned.
+    With ``s.full_model_check`` each search's fit is run once on the full model (:func:`_checks`,
+    appended to ``checks``). A fit is accepted where the two agree (within
+    ``s.reduced_agreement``), the full model fits it better than every point checked before
+    (``start``, the full model's check of ``theta0``, among them) and the search converged there
+    (not stopped by its budget). Otherwise the reduced model is
+    made again — its modes now including that run (a greedy enrichment of the snapshots, as in
+    trust-region POD: Arian, Fahl & Sachs 2000) — around the best point checked so far, and
+    searched again from there, ``s.reduced_rounds`` times at most; the point the full model fits
+    best is returned.
 
     With a fitted friction each search keeps μ_f within ``s.reduced_friction_trust`` of the μ_f the
     model was made at: two sliding snapshots hold a slide near the μ_f they were made at, not a
@@ -286,6 +296,10 @@ def _reduced_search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray, c
     too. ``centres`` and ``made_s`` (seconds) grow with each model made."""
     whole = ev.space
     best = None
+    if start is not None:
+        kept = fitting.FitResult(start["theta"], start["r_reduced"], "design", 0, 0, [],
+                                 "the design's start: the full model fits no searched fit better")
+        best = (start, (kept, None, start["theta"]))
     for round_ in range(s.reduced_rounds + 1):
         trusted = whole.friction_within(centres[-1], s.reduced_friction_trust)
         with ev.within(trusted):
@@ -300,35 +314,57 @@ def _reduced_search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray, c
             made_s.append(ev.reduce_around(theta))
             theta0 = theta
             continue
-        checks.append(_check(ev, theta, s))
-        if best is None or checks[-1]["cost_full_model_mm"] < best[0]["cost_full_model_mm"]:
-            best = (checks[-1], result)
-        if (checks[-1]["agrees"] and not edge) or last:
+        check, = _checks(ev, [theta], s)
+        checks.append(check)
+        better = best is None or check["cost_full_model_mm"] < best[0]["cost_full_model_mm"]
+        if better:
+            best = (check, result)
+        # a search stopped by its budget, not at the model's optimum, goes on from its fit
+        converged = result[0] is None or result[0].converged
+        if (check["agrees"] and better and converged and not edge) or last:
             break
-        centres.append(theta)
-        made_s.append(ev.reduce_around(theta, new_runs=False))
-        theta0 = theta
-    return best[1]
+        # made again from every run so far, around the best point (the fit, or the point before
+        # it where the full model fits this fit worse), and searched from there
+        theta0 = best[0]["theta"]
+        centres.append(theta0)
+        made_s.append(ev.reduce_around(theta0, new_runs=False))
+    return best[1][0], best[1][1], best[0]["theta"]
+
+
+def _design_starts(design: list, space: SearchSpace) -> list[np.ndarray]:
+    """The design's best start (``design``: :func:`~.fit.initial_guess`'s ``(cost, θ)``), and with
+    a fitted friction the best of each of its friction levels: on a reduced model the level that
+    slides the most may be ranked by a slide the full model does not make."""
+    ranked = sorted(design, key=lambda d: d[0])
+    if not space.friction:
+        return [np.asarray(ranked[0][1], float)]
+    levels = {}
+    for cost, theta in ranked:
+        levels.setdefault(round(float(theta[4]), 9), np.asarray(theta, float))
+    return list(levels.values())
 
 
 def _summary(check: dict) -> dict:
-    """A :func:`_check` as a line of ``parameters.json``."""
+    """A check (:func:`_checks`) as a line of ``parameters.json``."""
     return {"theta": check["theta"].tolist(), "cost_reduced_model_mm": check["cost_reduced_model_mm"],
             "cost_full_model_mm": check["cost_full_model_mm"], "agrees": check["agrees"]}
 
 
-def _check(ev: Evaluator, theta: np.ndarray, s: CalibrationSettings) -> dict:
-    """One run of the full model at ``θ`` (kept as a snapshot, :meth:`Evaluator.full_run`) beside
-    the reduced model's: their training costs, per-frame sums and whether they agree (within
-    ``s.reduced_agreement`` of each other)."""
-    r_full = ev.full_run(theta)
-    r_reduced = ev.one(theta)
-    full, reduced = float(np.abs(r_full).sum()), float(np.abs(r_reduced).sum())
-    ratio = full / reduced if reduced > 0 else np.inf
-    return {"theta": np.asarray(theta, float).copy(), "cost_reduced_model_mm": reduced, "cost_full_model_mm": full,
-            "S_t_reduced_model_mm": frame_sums_mm(r_reduced).round(3).tolist(),
-            "S_t_full_model_mm": frame_sums_mm(r_full).round(3).tolist(),
-            "agrees": bool(max(ratio, 1.0 / ratio) <= s.reduced_agreement)}
+def _checks(ev: Evaluator, thetas: list, s: CalibrationSettings) -> list[dict]:
+    """Runs of the full model at each ``θ`` (in parallel, kept as snapshots:
+    :meth:`Evaluator.full_runs`) beside the reduced model's: their training costs, per-frame sums
+    and whether they agree (within ``s.reduced_agreement`` of each other)."""
+    out = []
+    for theta, r_full, r_reduced in zip(thetas, ev.full_runs(thetas), ev.residuals(thetas)):
+        full, reduced = float(np.abs(r_full).sum()), float(np.abs(r_reduced).sum())
+        low, high = min(full, reduced), max(full, reduced)
+        ratio = 1.0 if high == 0 else (high / low if low > 0 else np.inf)
+        out.append({"theta": np.asarray(theta, float).copy(), "r_reduced": r_reduced,
+                    "cost_reduced_model_mm": reduced, "cost_full_model_mm": full,
+                    "S_t_reduced_model_mm": frame_sums_mm(r_reduced).round(3).tolist(),
+                    "S_t_full_model_mm": frame_sums_mm(r_full).round(3).tolist(),
+                    "agrees": bool(ratio <= s.reduced_agreement)})
+    return out
 
 
 def _at_trust_edge(log_mu: float, trusted: SearchSpace, whole: SearchSpace) -> bool:
@@ -386,7 +422,7 @@ def objective_for(asked: str, observation: Observation) -> str:
 def _expected_runs(s: CalibrationSettings) -> int:
     """A rough count of search runs, for the progress bar."""
     p = 4
-    passes = 2 if s.search_integrator == "reduced" else 1
+    passes = 2 if s.search_integrator == "reduced" and s.search_particles < s.model.tissue_particles else 1
     if s.method == "least_squares":
         return 6 + passes * s.max_evaluations * (p + 1) + 2 * p + 3
     if s.method == "cmaes":

@@ -176,9 +176,9 @@ class Evaluator:
         # θ its modes were made around (its runs differ from another reduced model's)
         self.model_tag = ""
         self.reductions: list[dict] = []   # each reduce_around's timings (s)
-        # the full runs whose nodes were kept (reduce_around's and full_run's), newest first: every
-        # reduced model of this spec is made from all of them
-        self.snapshots: list = []
+        # (θ, run) of the full runs whose nodes were kept (reduce_around's and full_runs'), newest
+        # first: every reduced model of this spec is made from all of them
+        self.snapshots: list[tuple] = []
         if self.log_path is not None and self.log_path.is_file():
             self._read_log()
 
@@ -308,12 +308,16 @@ class Evaluator:
                 raise CalibrationFailed(f"the reduced model's snapshot runs at {k} failed ({brief(exc)})") from None
         elif not self.snapshots:
             raise RuntimeError("a reduced model without new runs needs a kept full run (full_run)")
-        self.snapshots = list(runs) + self.snapshots
+        # the run at θ first: the model's settled state is its first snapshot's
+        here = [s for s in self.snapshots if np.array_equal(s[0], theta)]
+        self.snapshots = [(tuple(theta), r) for r in runs] + here + [s for s in self.snapshots
+                                                                    if not np.array_equal(s[0], theta)]
         ran = time.perf_counter()
-        self.spec.adopt_reduced(k, last, self.snapshots)
+        self.spec.adopt_reduced(k, last, [r for _, r in self.snapshots])
         made = time.perf_counter()
         self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
-        self.model_tag = "reduced@" + ",".join(f"{x:.9g}" for x in theta)
+        # a model made again at the same θ from more runs is another model: its runs are not cached
+        self.model_tag = "reduced@" + ",".join(f"{x:.9g}" for x in theta) + f"/{len(self.snapshots)}"
         done = time.perf_counter()
         self.reductions.append({"snapshot_runs_s": ran - started, "model_s": made - ran, "sent_s": done - made,
                                 "snapshot_run_s": [float(r.stats.get("seconds", 0.0)) for r in runs],
@@ -321,32 +325,40 @@ class Evaluator:
                                 "modes": int(self.spec._reduced[0].basis.size)})
         return done - started
 
-    def full_run(self, theta: np.ndarray, upto: int | None = None) -> np.ndarray:
-        """Residuals (mm) of one run of the full model at ``θ`` on all the cluster's cores (uncached,
-        logged as model ``"full"``); its nodes are kept (:attr:`snapshots`) for the next
-        reduced model. A run that fails gives :data:`FAILED_RESIDUAL_MM` everywhere."""
+    def full_runs(self, thetas: list[np.ndarray], upto: int | None = None) -> list[np.ndarray]:
+        """Residuals (mm) of runs of the full model at each ``θ``, in parallel on the cluster's cores
+        (uncached, logged as model ``"full"``); their nodes are kept (:attr:`snapshots`) for the
+        next reduced model. A run that fails gives :data:`FAILED_RESIDUAL_MM` everywhere."""
         n = len(self.data.frames) if upto is None else int(upto)
-        theta = np.clip(np.asarray(theta, float), self.space.lower, self.space.upper)
-        k = self.space.parameters(theta)
-        future = self._client.submit(full_run_task, self._remote[0], self._remote[1], k, n, self._cores, pure=False)
-        try:
-            result = future.result()
-            self.snapshots.insert(0, result.pop("snapshot"))
-        except InputError:
-            raise
-        except Exception as exc:
-            result = {"residuals_mm": np.full((n, self.data.width(len(self.spec.points_mm))), FAILED_RESIDUAL_MM),
-                      "seconds": 0.0, "steps": 0, "error": brief(exc)}
-            self.failed += 1
-        result["residuals_mm"] = np.asarray(result["residuals_mm"], float)
-        tag, self.model_tag = self.model_tag, "full"
-        try:
-            self._log(theta, n, result)
-        finally:
-            self.model_tag = tag
-        self.runs += 1
-        self.run_seconds += float(result["seconds"])
-        return result["residuals_mm"]
+        thetas = [np.clip(np.asarray(t, float), self.space.lower, self.space.upper) for t in thetas]
+        threads = max(1, self._cores // len(thetas))
+        futures = [self._client.submit(full_run_task, self._remote[0], self._remote[1], self.space.parameters(t), n,
+                                       threads, pure=False) for t in thetas]
+        out = []
+        for theta, future in zip(thetas, futures):
+            try:
+                result = future.result()
+                self.snapshots.insert(0, (tuple(theta), result.pop("snapshot")))
+            except InputError:
+                raise
+            except Exception as exc:
+                result = {"residuals_mm": np.full((n, self.data.width(len(self.spec.points_mm))), FAILED_RESIDUAL_MM),
+                          "seconds": 0.0, "steps": 0, "error": brief(exc)}
+                self.failed += 1
+            result["residuals_mm"] = np.asarray(result["residuals_mm"], float)
+            tag, self.model_tag = self.model_tag, "full"
+            try:
+                self._log(theta, n, result)
+            finally:
+                self.model_tag = tag
+            self.runs += 1
+            self.run_seconds += float(result["seconds"])
+            out.append(result["residuals_mm"])
+        return out
+
+    def full_run(self, theta: np.ndarray, upto: int | None = None) -> np.ndarray:
+        """:meth:`full_runs` of one ``θ`` (on all the cluster's cores)."""
+        return self.full_runs([theta], upto)[0]
 
     # -- evaluation -----------------------------------------------------------
     def residuals(self, thetas: Iterable[np.ndarray], upto: int | None = None) -> list[np.ndarray]:

@@ -33,6 +33,7 @@ class FitResult:
     runs: int
     trace: list = field(default_factory=list)   # (cost_mm, theta) per iteration / generation
     message: str = ""
+    converged: bool = True          # False: stopped by its budget of evaluations or generations
 
     @property
     def cost_mm(self) -> float:
@@ -78,7 +79,7 @@ def least_squares_fit(ev: Evaluator, theta0: np.ndarray, max_evaluations: int = 
                         loss="soft_l1", f_scale=f_scale, x_scale=ev.space.steps * 10, max_nfev=max_evaluations,
                         xtol=1e-3, ftol=1e-3, gtol=1e-6)
     r = ev.one(sol.x)
-    return FitResult(sol.x, r, "least_squares", int(sol.nfev), ev.runs, trace, str(sol.message))
+    return FitResult(sol.x, r, "least_squares", int(sol.nfev), ev.runs, trace, str(sol.message), sol.status > 0)
 
 
 def cmaes_fit(ev: Evaluator, theta0: np.ndarray, max_generations: int = 12, popsize: int | None = None,
@@ -108,7 +109,8 @@ def cmaes_fit(ev: Evaluator, theta0: np.ndarray, max_generations: int = 12, pops
         best = int(np.argmin(costs))
         trace.append((costs[best], to_theta(np.asarray(zs[best])).tolist()))
     theta = to_theta(np.asarray(es.result.xbest))
-    return FitResult(theta, ev.one(theta), "cmaes", generations, ev.runs, trace, str(dict(es.stop())))
+    stop = dict(es.stop())
+    return FitResult(theta, ev.one(theta), "cmaes", generations, ev.runs, trace, str(stop), "maxiter" not in stop)
 
 
 @dataclass

@@ -85,7 +85,7 @@ class CalibrationSettings(ConfigModel):
     force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     search_integrator: Literal["implicit", "reduced"] = Field(
-        "implicit", description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre, again around its best start, then the final model's own around the search's optimum; docs/decisions.md, issue 39)")
+        "implicit", description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre from two full runs, again from every full run so far wherever a full run finds it off — at the design's best start and at a fit — then, if the final model is finer, the final model's own around the search's optimum; docs/decisions.md, issues 39 and 41)")
     reduced_friction_trust: float = Field(
         1.25, gt=1.0, le=100.0, description="with the reduced search and a fitted friction: each search on a reduced model keeps μ_f within this factor of the μ_f the model was made at (two sliding snapshots do not show a stick far above it: docs/decisions.md, issue 41, session 35)")
     reduced_rounds: int = Field(
