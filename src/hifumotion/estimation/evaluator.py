@@ -326,14 +326,16 @@ class Evaluator:
         return done - started
 
     def full_runs(self, thetas: list[np.ndarray], upto: int | None = None) -> list[np.ndarray]:
-        """Residuals (mm) of runs of the full model at each ``θ``, in parallel on the cluster's cores
-        (uncached, logged as model ``"full"``); their nodes are kept (:attr:`snapshots`) for the
+        """Residuals (mm) of runs of the full model at each ``θ``, in parallel on the cluster's cores,
+        one thread each (uncached, logged as model ``"full"``); their nodes are kept (:attr:`snapshots`) for the
         next reduced model. A run that fails gives :data:`FAILED_RESIDUAL_MM` everywhere."""
         n = len(self.data.frames) if upto is None else int(upto)
         thetas = [np.clip(np.asarray(t, float), self.space.lower, self.space.upper) for t in thetas]
-        threads = max(1, self._cores // len(thetas))
+        # one thread a run, always: a run on two threads is not bitwise repeatable (its sums in
+        # another order), and a near-stick amplifies the last digits into another fit; two threads
+        # made a 1,000-particle slide only 1.2× faster (docs/decisions.md, issue 41, session 36)
         futures = [self._client.submit(full_run_task, self._remote[0], self._remote[1], self.space.parameters(t), n,
-                                       threads, pure=False) for t in thetas]
+                                       1, pure=False) for t in thetas]
         out = []
         for theta, future in zip(thetas, futures):
             try:
@@ -357,7 +359,7 @@ class Evaluator:
         return out
 
     def full_run(self, theta: np.ndarray, upto: int | None = None) -> np.ndarray:
-        """:meth:`full_runs` of one ``θ`` (on all the cluster's cores)."""
+        """:meth:`full_runs` of one ``θ``."""
         return self.full_runs([theta], upto)[0]
 
     # -- evaluation -----------------------------------------------------------
