@@ -395,6 +395,44 @@ def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
     assert [list(x) for x in _design_starts([(c, d[:4]) for c, d in design], SearchSpace())] == [design[3][1][:4]]
 
 
+def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_friction_levels():
+    """With a fitted friction and the full model's check, the first reduced model of a driven bar
+    comes from full runs at the design's centre at each of the design's friction levels (the
+    program's own travel: no snapshot scenes), made around the first; a force-held push keeps the
+    spec's snapshot scenes (F/E × 0.5 and × 2) around the centre."""
+    from hifumotion.estimation.calibrate import _centre_model
+    from hifumotion.estimation.settings import CalibrationSettings
+
+    class Recorder(FrictionEvaluator):
+        def __init__(self, truth):
+            super().__init__(truth)
+            self.calls = []
+
+        def full_runs(self, thetas, upto=None):
+            self.calls.append(("full", [np.array(t) for t in thetas]))
+            return [np.zeros((len(self.data.frames), 16)) for _ in thetas]
+
+        def reduce_around(self, theta, upto=None, new_runs=True):
+            self.calls.append(("reduce", np.array(theta), new_runs))
+            return 0.0
+
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
+    ev = Recorder(truth)
+    design = ev.space.initial_design()
+    centre = np.mean(design, axis=0)
+    _centre_model(ev, CalibrationSettings(), centre, driven=True)
+    (kind, at), (again, around, new_runs) = ev.calls
+    levels = sorted({float(d[4]) for d in design})
+    assert kind == "full" and again == "reduce" and not new_runs and len(levels) == 2
+    assert [float(a[4]) for a in at] == levels and all(np.array_equal(a[:4], centre[:4]) for a in at)
+    assert np.array_equal(around, at[0])
+    for driven, checked in ((False, True), (True, False)):
+        ev.calls = []
+        _centre_model(ev, CalibrationSettings(full_model_check=checked), centre, driven=driven)
+        assert len(ev.calls) == 1 and ev.calls[0][0] == "reduce" and ev.calls[0][2]
+        assert np.array_equal(ev.calls[0][1], centre)
+
+
 def test_a_fitted_friction_reaches_the_models_scene():
     from hifumotion.estimation.model import ModelSpec, scene_for
     from hifumotion.particles.scene import Scene

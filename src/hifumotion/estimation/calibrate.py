@@ -8,7 +8,9 @@
 3. **Search** on the search model, every batch of runs in parallel on Dask:
    the best of a small data-free initial design, then bounded least squares
    (default), CMA-ES, or the paper's Table 1 algorithm. A reduced search model is
-   made around the design's centre (its two snapshot runs in parallel); the full model
+   made around the design's centre (its two snapshot runs in parallel; for a driven
+   bar whose friction is fitted, runs at the program's own travel at the design's two
+   friction levels, :func:`_centre_model`); the full model
    is run at the design's best start and the reduced model made again around it with
    that run among its snapshots; the search runs from there. Each fit of a reduced
    search is checked by one run of the full model (``full_model_check``); where the two
@@ -171,7 +173,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         checks: list[dict] = []
         if reduced:     # the modes around the design's centre: every start is within a factor 4 of it
             centres.append(np.mean(space.initial_design(), axis=0))
-            timings["reduced_models_s"] = [ev.reduce_around(centres[-1])]
+            timings["reduced_models_s"] = [_centre_model(ev, s, centres[-1], driven)]
         theta0, design = fitting.initial_guess(ev)
         start = None
         if reduced:
@@ -220,7 +222,8 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
                 # the full model at the fit (the check the search ended with): its residual beside
                 # the reduced model's (parameters.json), and every check of the search
                 pool = checks + ([start] if start is not None and not second_pass else [])
-                check = next(c for c in reversed(pool) if np.array_equal(c["theta"], theta))
+                # (a fit found again by a later round: the check of the round that found it first)
+                check = next(c for c in pool if np.array_equal(c["theta"], theta))
                 mapped["full_model_check"] = {key: value for key, value in check.items() if key not in ("theta", "r_reduced")}
                 mapped["full_model_check"]["rounds"] = [_summary(c) for c in checks]
                 if not check["agrees"]:
@@ -329,6 +332,26 @@ def _reduced_search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray, c
         centres.append(theta0)
         made_s.append(ev.reduce_around(theta0, new_runs=False))
     return best[1][0], best[1][1], best[0]["theta"]
+
+
+def _centre_model(ev: Evaluator, s: CalibrationSettings, centre: np.ndarray, driven: bool) -> float:
+    """Make ``ev``'s first reduced model, around the design's ``centre``; seconds taken.
+
+    Its snapshots are the spec's (:meth:`~.model.ModelSpec.snapshot_scenes`: F/E, or a driven bar's
+    travel, × 0.5 and × 2) — except where a driven bar's friction is fitted and the full model
+    checks the search: a driven bar's travel is known, so its runs are at the program's own travel,
+    at each of the design's friction levels instead (a slide and a near-stick, the two the design
+    is ranked on; run in parallel and kept, ``Evaluator.full_runs``), the model made around the
+    first. docs/decisions.md, issue 41, session 36."""
+    space = ev.space
+    if not (driven and space.friction and s.full_model_check):
+        return ev.reduce_around(centre)
+    started = time.perf_counter()
+    levels = sorted({float(d[4]) for d in space.initial_design()})
+    at = [np.append(np.asarray(centre, float)[:4], mu) for mu in levels]
+    ev.full_runs(at)
+    ran = time.perf_counter() - started
+    return ran + ev.reduce_around(at[0], new_runs=False)
 
 
 def _design_starts(design: list, space: SearchSpace) -> list[np.ndarray]:
