@@ -283,7 +283,7 @@ class Evaluator:
         the model here), send it to the workers and run on it from now on; seconds taken.
         Its modes are those of every full run kept so far (:attr:`snapshots`) and, with
         ``new_runs``, of the spec's snapshot scenes at ``θ`` run now; without, ``θ``'s own run must
-        be among the kept ones already (:meth:`full_run`). Nothing to do (0 s) unless the spec's
+        be among the kept ones already (:meth:`full_runs`). Nothing to do (0 s) unless the spec's
         integrator is ``"reduced"``."""
         import time
 
@@ -307,7 +307,7 @@ class Evaluator:
             except Exception as exc:
                 raise CalibrationFailed(f"the reduced model's snapshot runs at {k} failed ({brief(exc)})") from None
         elif not self.snapshots:
-            raise RuntimeError("a reduced model without new runs needs a kept full run (full_run)")
+            raise RuntimeError("a reduced model without new runs needs a kept full run (full_runs)")
         # the run at θ first: the model's settled state is its first snapshot's
         here = [s for s in self.snapshots if np.array_equal(s[0], theta)]
         self.snapshots = [(tuple(theta), r) for r in runs] + here + [s for s in self.snapshots
@@ -344,9 +344,7 @@ class Evaluator:
             except InputError:
                 raise
             except Exception as exc:
-                result = {"residuals_mm": np.full((n, self.data.width(len(self.spec.points_mm))), FAILED_RESIDUAL_MM),
-                          "seconds": 0.0, "steps": 0, "error": brief(exc)}
-                self.failed += 1
+                result = self._failed(n, exc)
             result["residuals_mm"] = np.asarray(result["residuals_mm"], float)
             tag, self.model_tag = self.model_tag, "full"
             try:
@@ -358,9 +356,12 @@ class Evaluator:
             out.append(result["residuals_mm"])
         return out
 
-    def full_run(self, theta: np.ndarray, upto: int | None = None) -> np.ndarray:
-        """:meth:`full_runs` of one ``θ``."""
-        return self.full_runs([theta], upto)[0]
+    def _failed(self, n: int, exc: Exception) -> dict:
+        """A run that blew up, counted: :data:`FAILED_RESIDUAL_MM` at every point of ``n`` frames,
+        so an estimator steps away from it."""
+        self.failed += 1
+        return {"residuals_mm": np.full((n, self.data.width(len(self.spec.points_mm))), FAILED_RESIDUAL_MM),
+                "seconds": 0.0, "steps": 0, "error": brief(exc)}
 
     # -- evaluation -----------------------------------------------------------
     def residuals(self, thetas: Iterable[np.ndarray], upto: int | None = None) -> list[np.ndarray]:
@@ -405,9 +406,7 @@ class Evaluator:
             except InputError:
                 raise
             except Exception as exc:  # a run that blew up is a bad parameter set, not the end of the fit
-                result = {"residuals_mm": np.full((n, self.data.width(len(self.spec.points_mm))), FAILED_RESIDUAL_MM), "seconds": 0.0,
-                          "steps": 0, "error": brief(exc)}
-                self.failed += 1
+                result = self._failed(n, exc)
                 log.debug("forward run with %s failed: %s", ks[futures[fut]], brief(exc))
             result["residuals_mm"] = np.asarray(result["residuals_mm"], float)
             results[futures[fut]] = result
