@@ -34,6 +34,12 @@ Every twin also reports the displacement's error per band of the tissue's true i
 runs bench_estimation's driven twins instead (issue 41: the sample slides millimetres) and a
 push that strains the section 20–40 % (``STRAIN_TWINS``); targets centroid ≤ 0.2 mm and
 displacement RMS ≤ 0.15 mm at every frame.
+
+Every twin reports the floor of any in-plane tracker (the true frame-0 section carried by the
+true in-plane displacement, scored against the true section: what out-of-plane motion changes)
+and ``tracker_beyond_floor``: how far the tracked contour's centroid drifts from that floor's
+after frame 0 — the tracker's own error, apart from its initial segmentation's and from the
+section's out-of-plane change.
 """
 
 from __future__ import annotations
@@ -159,6 +165,19 @@ def displacement_by_strain(series, truth, bands=STRAIN_BANDS) -> dict:
                      "pixel_frames": int(inside.sum())}
     out["largest_true_strain"] = round(float(np.nanmax(np.where(ok, strain, np.nan))), 3)
     return out
+
+
+def tracking_drift(masks: np.ndarray, floor: np.ndarray, px: float) -> dict:
+    """How far (mm) the tracked masks' centroid moves from the floor's (:func:`in_plane_floor`)
+    after frame 0 (their frame-0 difference, the initial segmentation's, taken out): the
+    tracker's own drift; and the floor's own centroid error against the true section."""
+    from hifumotion.metrics import centroid
+
+    c = np.array([centroid(m, px) for m in masks])
+    f = np.array([centroid(m, px) for m in floor])
+    drift = np.linalg.norm((c - c[0]) - (f - f[0]), axis=1)
+    return {"drift_max_mm": round(float(drift.max()), 4), "drift_mean_mm": round(float(drift.mean()), 4),
+            "frame0_offset_mm": round(float(np.linalg.norm(c[0] - f[0])), 4)}
 
 
 def in_plane_floor(truth, px: float) -> np.ndarray:
@@ -305,12 +324,16 @@ def run_twin(folder: Path, estimators: list[str]) -> dict:
     result["displacement"][f"{estimators[0]}, fill=mean"] = displacement_errors(series, truth, visible)
     # the floor of any tracker of these images: the true frame-0 contour carried by the true in-plane
     # displacement (what the speckle shows) against the true section (which out-of-plane motion changes too)
-    result["contours"]["floor: truth carried in-plane"] = contour_scores(
-        in_plane_floor(truth, px), truth.masks, px, 0.0)
+    floor = in_plane_floor(truth, px)
+    result["contours"]["floor: truth carried in-plane"] = contour_scores(floor, truth.masks, px, 0.0)
     t0 = time.perf_counter()
     ours = follow(frames, obs.initial_contour, px, solids=solids, boundary_offset_mm=offset)
     seconds = time.perf_counter() - t0
     result["contours"]["speckle (ours)"] = contour_scores(ours.masks, truth.masks, px, seconds)
+    # the tracker's own error: against the floor (what the speckle shows: the true frame-0 section
+    # carried in-plane), from frame 0's contour on (its segmentation's offset taken out), so a
+    # section that changes by out-of-plane motion, which no in-plane tracker sees, is not counted
+    result["tracker_beyond_floor"] = tracking_drift(ours.masks, floor, px)
     exclude = known_solids(imaging_plane(obs.setup), obs.setup, BAR_MARGIN_MM).any
     for name, (masks, secs) in peers(frames, obs.initial_contour, px, exclude, offset, ours.masks[0]).items():
         result["contours"][name] = contour_scores(masks, truth.masks, px, secs)
