@@ -340,6 +340,13 @@ def main() -> None:
         "targets_met": {f"{n}/{m}": all(r["targets"].values()) for n, m, r in everything},
         "targets_missed": {f"{n}/{m}": [k for k, ok in r["targets"].items() if not ok] for n, m, r in everything},
     }
+    driven = {n: tw for n, tw in out["twins"].items() if tw["protocol"] in DRIVEN}
+    if driven:
+        # issue 41 measures its targets on at least three twins that each move ≥ 2 mm in the window
+        moving = sorted(n for n, tw in driven.items()
+                        if any(r["validation_window_motion_mm"] >= WINDOW_MOTION_MM for r in tw["methods"].values()))
+        out["summary"][f"driven_twins_moving>={WINDOW_MOTION_MM}mm_in_validation"] = moving
+        out["summary"]["at_least_three_such_twins"] = len(moving) >= 3
     print(json.dumps(out, indent=1, default=float))
 
 
