@@ -169,8 +169,8 @@ def displacement_by_strain(series, truth, bands=STRAIN_BANDS) -> dict:
 
 def tracking_drift(masks: np.ndarray, floor: np.ndarray, px: float) -> dict:
     """How far (mm) the tracked masks' centroid moves from the floor's (:func:`in_plane_floor`)
-    after frame 0 (their frame-0 difference, the initial segmentation's, taken out): the
-    tracker's own drift; and the floor's own centroid error against the true section."""
+    after frame 0, their frame-0 difference (the initial segmentation's, also returned) taken
+    out: the tracker's own drift, worst frame and mean."""
     from hifumotion.metrics import centroid
 
     c = np.array([centroid(m, px) for m in masks])
