@@ -380,7 +380,10 @@ def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
 
     truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
     ev = ReducedFrictionEvaluator(truth, centre_mu=0.3)
-    s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=0)
+    # uncorrected: corrected by the full model's miss at the start, the search would not leave it
+    # (test_the_full_models_miss_at_the_centre_corrects_the_reduced_search)
+    s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=0,
+                            reduced_correction=False)
     at_truth = ev.space.theta(truth)
     start, = _checks(ev, [at_truth], s)
     assert start["cost_full_model_mm"] == pytest.approx(0.0, abs=1e-9) and not start["agrees"]
@@ -393,6 +396,61 @@ def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
     starts = _design_starts(design, ev.space)
     assert [list(x) for x in starts] == [design[3][1], design[2][1]]
     assert [list(x) for x in _design_starts([(c, d[:4]) for c, d in design], SearchSpace())] == [design[3][1][:4]]
+
+
+class BiasedReducedEvaluator(FrictionEvaluator):
+    """A reduced model that misses the full one by a fixed residual pattern, as a reduced model
+    misses even its own snapshot's run where the sample sticks and slips (docs/decisions.md,
+    issue 41, session 37); the full model is the friction evaluator's exact residuals."""
+
+    def __init__(self, truth: Parameters):
+        super().__init__(truth)
+        rng = np.random.default_rng(7)
+        self.bias = 0.3 * rng.normal(0, 1, self.patterns.shape[1:])
+        self.made = 0
+
+    def reduce_around(self, theta, upto=None, new_runs=True) -> float:
+        self.made += 1
+        self.model_tag = f"reduced#{self.made}"
+        return 0.0
+
+    def full_runs(self, thetas, upto=None):
+        return [r["residuals_mm"] for r in FrictionEvaluator._submit(self, [self.space.parameters(t) for t in thetas],
+                                                                    len(self.data.frames))]
+
+    def _submit(self, ks, n):
+        out = FrictionEvaluator._submit(self, ks, n)
+        for r in out:
+            r["residuals_mm"] = r["residuals_mm"] + self.bias[:n]
+        return out
+
+
+def test_the_full_models_miss_at_the_centre_corrects_the_reduced_search():
+    """A reduced model off the full one by a fixed pattern: searched as it is from a checked start,
+    its fit is the bias's optimum, which the full model fits worse, and it does not agree there;
+    searched with the full model's miss at the start added (zero-order consistency, Alexandrov et
+    al. 1998), the first search reaches the truth, where the corrected model and the full one agree."""
+    from hifumotion.estimation.calibrate import _checks, _reduced_search
+    from hifumotion.estimation.settings import CalibrationSettings
+
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
+    theta0 = np.array([np.log(14000.0), 0.45, np.log(1e5), 0.5, np.log(0.15)])
+    found = {}
+    for corrected in (False, True):
+        ev = BiasedReducedEvaluator(truth)
+        s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=0,
+                                reduced_correction=corrected)
+        start, = _checks(ev, [theta0], s)
+        checks = []
+        _, _, theta = _reduced_search(ev, s, theta0, [theta0], [], checks, start)
+        found[corrected] = (theta, checks[0])
+    (plain, plain_check), (fit, check) = found[False], found[True]
+    k = FrictionEvaluator(truth).space.parameters(fit)
+    assert k.youngs_modulus_pa == pytest.approx(9000.0, rel=0.01) and k.friction == pytest.approx(0.12, rel=0.01)
+    assert check["agrees"] and check["cost_full_model_mm"] == pytest.approx(check["cost_reduced_model_mm"], rel=0.05)
+    # uncorrected, the bias's optimum: off the truth, and the full model fits it worse
+    assert not plain_check["agrees"] and plain_check["cost_full_model_mm"] > 10 * check["cost_full_model_mm"]
+    assert abs(np.exp(plain[0]) / 9000.0 - 1) > 0.01 or abs(np.exp(plain[4]) / 0.12 - 1) > 0.01
 
 
 def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_friction_levels():

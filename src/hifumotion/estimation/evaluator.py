@@ -179,6 +179,8 @@ class Evaluator:
         # (θ, run) of the full runs whose nodes were kept (reduce_around's and full_runs'), newest
         # first: every reduced model of this spec is made from all of them
         self.snapshots: list[tuple] = []
+        # added to every residual returned (mm, ``(n, M)`` of the training frames; :meth:`corrected`)
+        self._correction: np.ndarray | None = None
         if self.log_path is not None and self.log_path.is_file():
             self._read_log()
 
@@ -267,6 +269,17 @@ class Evaluator:
             self.failed += other.failed
             self.run_seconds += other.run_seconds
             other._client = other._remote = None
+
+    @contextmanager
+    def corrected(self, correction: np.ndarray | None):
+        """Inside the block :meth:`residuals` returns each run's residuals plus ``correction`` (mm,
+        the training frames' ``(n, M)``; None: none): a model made to agree with another at one
+        point. Cached runs are kept uncorrected."""
+        kept, self._correction = self._correction, None if correction is None else np.asarray(correction, float)
+        try:
+            yield self
+        finally:
+            self._correction = kept
 
     @contextmanager
     def within(self, space: SearchSpace):
@@ -384,8 +397,14 @@ class Evaluator:
                 else:
                     self.cache[key] = result["residuals_mm"]
             keys = [_key(t, n, self.model_tag) for t in thetas]
-            return [failed[key] if key in failed else self.cache[key] for key in keys]
-        return [self.cache[_key(t, n, self.model_tag)] for t in thetas]
+            return [self._corrected(failed[key] if key in failed else self.cache[key]) for key in keys]
+        return [self._corrected(self.cache[_key(t, n, self.model_tag)]) for t in thetas]
+
+    def _corrected(self, r: np.ndarray) -> np.ndarray:
+        """``r`` plus the correction in force (:meth:`corrected`) on its frames."""
+        if self._correction is None:
+            return r
+        return r + self._correction[:len(r)]
 
     def _submit(self, ks: list[Parameters], n: int) -> list[dict]:
         """Run the parameter sets on the cluster; results in the order asked."""

@@ -94,6 +94,8 @@ class CalibrationSettings(ConfigModel):
         1.1, gt=1.0, le=10.0, description="with the reduced search: the reduced model holds at a fit where its training cost and the full model's are within this factor of each other")
     full_model_check: bool = Field(
         True, description="with the reduced search: each fit checked by one run of the full model, which becomes a snapshot of the model made again where the two disagree; the check's residuals recorded beside the reduced model's")
+    reduced_correction: bool = Field(
+        True, description="with the reduced search and its full-model checks: each search runs on the reduced model's residuals plus the full model's miss at the point the model was made around (the residuals' difference there, known from its check), so that the searched model and the full one agree there (zero-order consistency of a trust-region model: Alexandrov et al. 1998; docs/decisions.md, issue 41, session 37)")
     max_evaluations: int = Field(8, ge=1, le=10_000, description="least squares: residual evaluations (each with a Jacobian)")
     cma_generations: int = Field(12, ge=1, le=10_000, description="CMA-ES: generations")
     threshold_mm_per_point: float | None = Field(
