@@ -239,6 +239,27 @@ def test_least_squares_recovers_known_parameters_and_flags_the_undetermined():
     assert costs[2.0] == pytest.approx(costs[1.0], abs=1e-6) and costs[0.5] == pytest.approx(costs[1.0], abs=1e-6)
 
 
+def test_the_errors_scale_with_the_scatter_of_the_residuals_they_are_given():
+    """Gauss–Newton's errors are s × √diag((JᵀJ)⁻¹): at the truth of an exact model the scatter is
+    the half-pixel floor; given another model's residuals there (a full model's beside a reduced
+    one's Jacobian), the errors scale by their scatter over that floor, and the Jacobian's part
+    is the same."""
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5)
+    ev = AnalyticEvaluator(truth)
+    at = ev.space.theta(truth)
+    own = uncertainty(ev, at)
+    assert own.sigma_mm == pytest.approx(0.5 * ev.data.pixel_mm)
+    other = np.random.default_rng(3).normal(0, 1, ev.one(at).shape)
+    m, p = other.size, len(at)
+    s = float(np.sqrt(other.ravel() @ other.ravel() / (m - p)))
+    assert s > 0.5 * ev.data.pixel_mm
+    given = uncertainty(ev, at, other)
+    assert given.sigma_mm == pytest.approx(s)
+    seen = np.isfinite(own.std)
+    assert np.allclose(given.std[seen], own.std[seen] * s / own.sigma_mm)
+    assert np.array_equal(np.isfinite(given.std), seen)
+
+
 class FrictionEvaluator(AnalyticEvaluator):
     """The analytic evaluator on a space that fits the friction too: ln μ_f has its own pattern."""
 

@@ -211,19 +211,23 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
                 timings["reductions"] = ev.reductions + (fit_ev.reductions if second_pass else [])
                 mapped["reduced_model_centres"] = [c.tolist() for c in centres]
             timings["search_s"] = time.perf_counter() - t1
+            check = None
+            if reduced and s.full_model_check:
+                # the full model at the fit (the check the search ended with)
+                pool = checks + ([start] if start is not None and not second_pass else [])
+                # (a fit found again by a later round: the check of the round that found it first)
+                check = next(c for c in pool if np.array_equal(c["theta"], theta))
             t2 = time.perf_counter()
-            unc = fitting.uncertainty(fit_ev, theta)
+            # the errors from the scatter of the model that was fitted (the full model's at the
+            # fit, where it was run), the reduced model's Jacobian
+            unc = fitting.uncertainty(fit_ev, theta, None if check is None else check["r_full"])
             j = fitting.jacobian(fit_ev, theta)
             if s.degeneracy_check:
                 degeneracy = fitting.degeneracy(fit_ev, theta)
             timings["uncertainty_s"] = time.perf_counter() - t2
             tell("search", 1.0)
-            if reduced and s.full_model_check:
-                # the full model at the fit (the check the search ended with): its residual beside
-                # the reduced model's (parameters.json), and every check of the search
-                pool = checks + ([start] if start is not None and not second_pass else [])
-                # (a fit found again by a later round: the check of the round that found it first)
-                check = next(c for c in pool if np.array_equal(c["theta"], theta))
+            if check is not None:
+                # its residual beside the reduced model's (parameters.json), and every check of the search
                 mapped["full_model_check"] = {key: value for key, value in check.items() if key not in ("theta", "r_reduced", "r_full")}
                 mapped["full_model_check"]["rounds"] = [_summary(c) for c in checks]
                 if not check["agrees"]:
