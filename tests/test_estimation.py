@@ -474,6 +474,26 @@ def test_the_full_models_miss_at_the_centre_corrects_the_reduced_search():
     assert abs(np.exp(plain[0]) / 9000.0 - 1) > 0.01 or abs(np.exp(plain[4]) / 0.12 - 1) > 0.01
 
 
+def test_a_search_that_stays_at_its_checked_start_ends_the_rounds_without_another_full_run():
+    """Started at the full model's optimum (its cost 0 there), the corrected reduced model is the
+    full one at its centre, so the search does not leave it: the rounds end there, with no second
+    full run at the same point and no model made again from the same runs (which would search the
+    same model again, round after round)."""
+    from hifumotion.estimation.calibrate import _checks, _reduced_search
+    from hifumotion.estimation.settings import CalibrationSettings
+
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
+    ev = BiasedReducedEvaluator(truth)
+    at_truth = ev.space.theta(truth)
+    s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=3)
+    start, = _checks(ev, [at_truth], s)
+    assert start["cost_full_model_mm"] == pytest.approx(0.0, abs=1e-9)
+    checks = []
+    fit, _, theta = _reduced_search(ev, s, at_truth, [at_truth], [], checks, start)
+    assert np.array_equal(theta, at_truth) and fit.method == "design"
+    assert checks == [] and ev.made == 0
+
+
 def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_friction_levels():
     """With a fitted friction and the full model's check, the first reduced model of a driven bar
     comes from full runs at the design's centre at each of the design's friction levels (the

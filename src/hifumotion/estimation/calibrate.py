@@ -293,7 +293,8 @@ def _reduced_search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray, c
     made again — its modes now including that run (a greedy enrichment of the snapshots, as in
     trust-region POD: Arian, Fahl & Sachs 2000) — around the best point checked so far, and
     searched again from there, ``s.reduced_rounds`` times at most; the point the full model fits
-    best is returned.
+    best is returned. A search that does not leave a point the full model has run ends the
+    rounds without running it again.
 
     With a fitted friction each search keeps μ_f within ``s.reduced_friction_trust`` of the μ_f the
     model was made at: two sliding snapshots hold a slide near the μ_f they were made at, not a
@@ -322,6 +323,11 @@ def _reduced_search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray, c
             made_s.append(ev.reduce_around(theta))
             theta0 = theta
             continue
+        if any(np.array_equal(c["theta"], theta) for c in ([best[0]] if best is not None else []) + checks):
+            # the search stayed where the full model has run (its start: the centre, where the
+            # corrected model is the full one). Its step is zero; a model made again there from
+            # the same runs is the same model, so no later round moves either: converged
+            break
         with ev.corrected(correction):    # the searched model's cost beside the full model's
             check, = _checks(ev, [theta], s)
         checks.append(check)
