@@ -30,6 +30,7 @@ Usage (run it alone: parallel jobs slow each other's timings)::
     python benchmarks/bench_estimation.py --twin DIR           # one existing twin (observed/ + truth/)
     python benchmarks/bench_estimation.py --quick              # slow_push_s42, least squares
     python benchmarks/bench_estimation.py --methods least_squares --compare-search   # reduced vs implicit search
+    python benchmarks/bench_estimation.py --large-motion --model-at-truth   # the model at the true K beside the fit
 
 ``--compare-search`` calibrates each twin a second time with the other search model
 (``CalibrationSettings.search_integrator``: the search model's reduced model or its full
@@ -99,8 +100,9 @@ def observe(twin: Path, training: str, tracking: str, offset_mm: float, fill_bar
 
 
 def calibrate_and_predict(observed, obs, train, valid, truth, params, method, workers, horizons, tmp,
-                          settings: dict | None = None) -> dict:
-    """One method on one observation: calibration, prediction, Table 4, online mode."""
+                          settings: dict | None = None, at_truth: bool = False) -> dict:
+    """One method on one observation: calibration, prediction, Table 4, online mode; with
+    ``at_truth`` the fitted model at the twin's true parameters too (:func:`model_at_truth`)."""
     from hifumotion.estimation.calibrate import CalibrationSettings, calibrate, recovered_parameters
     from hifumotion.prediction.evaluate import evaluate, online_schedule
     from hifumotion.prediction.pipeline import online_predictions, predict_calibrated
@@ -125,7 +127,10 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
     ev = evaluate(pred, cal.spec, ref, obs.frame_masks, observed.frames, truth, train, valid,
                   observed.frame_interval_s, horizons, now)
     window_s = (valid[-1] - valid[0]) * observed.frame_interval_s
+    extra = {"model_at_truth": model_at_truth(cal.spec, k, params, ref, obs, observed, truth, train, valid)
+             } if at_truth else {}
     return {
+        **extra,
         "calibration_s": cal_s, "calibration_timings_s": cal.timings_s, "runs": cal.runs, "objective": cal.objective,
         "calibration_settings": {"search_integrator": cal.search_spec.settings.integrator},
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
@@ -135,6 +140,32 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
         "predict_speedup_over_realtime": window_s / predict_s,
         "online_ms_per_frame": online_ms, "frame_interval_ms": 1000.0 * observed.frame_interval_s,
     }
+
+
+def true_parameters(params: dict, fitted):
+    """The twin's true K (``truth/parameters.json``) in the fitted model's terms: a driven bar pushed
+    no force, so its F is the fit's (the model does not read it); μ_f the truth's, fitted or not."""
+    from dataclasses import replace
+
+    force = params.get("external_force_n")
+    return replace(fitted, force_n=fitted.force_n if force is None else float(force),
+                   youngs_modulus_pa=params["youngs_modulus_pa"], poisson_ratio=params["poisson_ratio"],
+                   beta1=params["beta1_pa_s_pow"], beta2=params["beta2"], friction=params.get("friction"))
+
+
+def model_at_truth(spec, fitted, params, ref, obs, observed, truth, train, valid) -> dict:
+    """The fitted model (its resolution and settings) run at the twin's true parameters and scored as
+    the fit is: the model's own error, apart from the estimation's. A fit that validates as well as
+    this has left nothing to the search; one that validates better has compensated for the model."""
+    from hifumotion.prediction.evaluate import evaluate
+    from hifumotion.prediction.pipeline import predict_calibrated
+
+    k = true_parameters(params, fitted)
+    t0 = time.perf_counter()
+    pred = predict_calibrated(spec, k, ref, train + valid)
+    ev = evaluate(pred, spec, ref, obs.frame_masks, observed.frames, truth, train, valid, observed.frame_interval_s)
+    return {"parameters": k.as_dict(), "run_s": time.perf_counter() - t0, "training": ev.physics["training"],
+            "validation": ev.physics["validation"]}
 
 
 def ncc_validation(observed, obs, truth, valid) -> dict:
@@ -210,7 +241,7 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
     horizons = [int(h) for h in args.horizons.split(",")]
     for method in args.methods.split(","):
         r = calibrate_and_predict(observed, obs, train, valid, truth, params, method, args.workers,
-                                  horizons, tmp, _settings(args.set))
+                                  horizons, tmp, _settings(args.set), args.model_at_truth)
         r["validation_window_motion_mm"] = window_motion_mm(motion, valid)
         r["targets"] = targets(protocol, r)
         out["methods"][method] = r
@@ -248,8 +279,10 @@ def _tell(name: str, label: str, r: dict) -> None:
     v = r["physics"]["validation"]
     fe = r["recovered"].get("force_over_youngs_m2")    # none for a driven bar: it pushed no force
     fe_text = "" if fe is None else f"F/E {fe['rel_error']:+.0%}, "
-    print(f"{name} {label}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm, "
-          f"{fe_text}{r['calibration_s']:.0f} s", file=sys.stderr, flush=True)
+    at = r.get("model_at_truth")
+    at_text = "" if at is None else f", at the truth {at['validation']['centroid_mean_mm']:.3f} mm"
+    print(f"{name} {label}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm"
+          f"{at_text}, {fe_text}{r['calibration_s']:.0f} s", file=sys.stderr, flush=True)
 
 
 def search_comparison(reduced: dict, implicit: dict) -> dict:
@@ -292,6 +325,9 @@ def main() -> None:
     ap.add_argument("--horizons", default="4,6,8", help="online horizons in frames")
     ap.add_argument("--set", default="", help="CalibrationSettings fields to change, e.g. "
                     "'quality_weights=true,bar_motion=false' (to measure an option against the defaults)")
+    ap.add_argument("--model-at-truth", action="store_true",
+                    help="also run the fitted model at the twin's true parameters (its own error, apart from the "
+                    "estimation's: model_at_truth)")
     ap.add_argument("--no-bar-cap", action="store_true", help="do not continue the sweep's top under the bar")
     ap.add_argument("--compare-search", action="store_true",
                     help="also calibrate with the other search model (reduced/implicit) and compare (issue 39)")
