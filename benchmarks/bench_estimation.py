@@ -134,7 +134,7 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
         "calibration_s": cal_s, "calibration_timings_s": cal.timings_s, "runs": cal.runs, "objective": cal.objective,
         "calibration_settings": {"search_integrator": cal.search_spec.settings.integrator},
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
-        "degeneracy": cal.degeneracy, "space_mapping": cal.mapped,
+        "degeneracy": cal.degeneracy, "space_mapping": cal.mapped, "resolution_check": cal.resolution,
         "physics": ev.physics, "baselines_validation": ev.baselines, "online": ev.online,
         "predict_s": predict_s, "validation_window_s": window_s,
         "predict_speedup_over_realtime": window_s / predict_s,
@@ -281,6 +281,9 @@ def _tell(name: str, label: str, r: dict) -> None:
     fe_text = "" if fe is None else f"F/E {fe['rel_error']:+.0%}, "
     at = r.get("model_at_truth")
     at_text = "" if at is None else f", at the truth {at['validation']['centroid_mean_mm']:.3f} mm"
+    rc = r.get("resolution_check")
+    if rc is not None:
+        at_text += f", ×2 particles moves the points {rc['largest_mm']:.3f} mm"
     print(f"{name} {label}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm"
           f"{at_text}, {fe_text}{r['calibration_s']:.0f} s", file=sys.stderr, flush=True)
 

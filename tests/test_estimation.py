@@ -494,6 +494,28 @@ def test_a_search_that_stays_at_its_checked_start_ends_the_rounds_without_anothe
     assert checks == [] and ev.made == 0
 
 
+def test_the_resolution_check_compares_displacements_from_each_runs_own_frame_0():
+    """Two runs of the same points: one the other moved rigidly by a shift that grows frame by frame
+    (and starts offset, which is no motion): the difference is that growth, per frame; a shape
+    mismatch is refused."""
+    from hifumotion.estimation.resolution import ResolutionCheck, displacement_difference_mm
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(0, 5, (4, 10, 3)).cumsum(axis=0)
+    growth = np.array([0.0, 0.1, 0.25, 0.5])
+    b = a + np.array([1.0, -2.0, 0.5]) + growth[:, None, None] * np.array([0.6, 0.8, 0.0])
+    np.testing.assert_allclose(displacement_difference_mm(a, b), growth, atol=1e-12)
+    # one point of ten off by 1 mm at the last frame: RMS √(1/10)
+    c = a.copy()
+    c[3, 0] += [1.0, 0.0, 0.0]
+    np.testing.assert_allclose(displacement_difference_mm(a, c), [0, 0, 0, np.sqrt(0.1)], atol=1e-12)
+    with pytest.raises(ValueError):
+        displacement_difference_mm(a, a[:, :5])
+    check = ResolutionCheck((1000, 2000), (2.0, 1.6), growth, 0.3, 3)
+    assert check.largest_mm == 0.5 and not check.resolved
+    assert ResolutionCheck((1000, 2000), (2.0, 1.6), growth * 0.5, 0.3, 3).resolved
+
+
 def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_friction_levels():
     """With a fitted friction and the full model's check, the first reduced model of a driven bar
     comes from full runs at the design's centre at each of the design's friction levels (the
@@ -803,8 +825,21 @@ def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path
     train, valid = default_frames(len(observed.frames))
     settings = validate_config(EstimationConfig, {
         "search_particles": 150, "max_evaluations": 1, "workers": 1, "search_integrator": "reduced",
+        "resolution_check": final_particles == 150,
         "model": {"tissue_particles": final_particles, "creep": {"stick_mm": 0.02}}})
     observation, cal = observe_and_calibrate(observed, tmp_path / "cal", settings, train)
+    if final_particles == 150:
+        # the fit run again on twice the particles, frames 0 … the last training frame, both runs
+        # from their own frame 0; in parameters.json as it was measured
+        rc = cal.resolution
+        assert rc["particles"][0] == len(cal.spec.tissue_mm) and rc["particles"][1] >= 300
+        assert rc["spacing_mm"][1] < rc["spacing_mm"][0]
+        assert len(rc["difference_mm"]) == max(train) + 1 and rc["difference_mm"][0] == 0.0
+        assert rc["resolved"] == (rc["largest_mm"] <= rc["pixel_mm"]) and rc["pixel_mm"] == observed.pixel_mm
+        written = json.loads((tmp_path / "cal" / "parameters.json").read_text())["fit"]["resolution_check"]
+        assert written["largest_mm"] == pytest.approx(rc["largest_mm"])
+    else:
+        assert cal.resolution is None
     spec, k, reference, _ = load_calibration(tmp_path / "cal")
     assert len(spec.tissue_mm) == len(cal.spec.tissue_mm)
     assert (len(cal.spec.tissue_mm) == len(cal.search_spec.tissue_mm)) == (final_particles == 150)

@@ -33,6 +33,8 @@
    better model of a slide (its bar's trailing rim can catch the sample, docs/decisions.md).
 5. **Uncertainty**: standard errors and identifiability from the Jacobian; the
    F–E–β1 scaling the push cannot see, run and reported.
+6. **Resolution** (``resolution_check``, off by default): the fit run again on twice the
+   particles (:mod:`.resolution`), with a warning where the points move by more than a pixel.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ from hifumotion.estimation.settings import CalibrationSettings
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm
 from hifumotion.estimation.prepare import Observation
 from hifumotion.estimation.protocol import default_frames, parse_frames
+from hifumotion.estimation.resolution import resolution_check
 from hifumotion.estimation.space import FRICTION_BOUNDS, FRICTION_NAME, SearchSpace
 
 log = logging.getLogger(__name__)
@@ -86,6 +89,7 @@ class Calibration:
     failed_runs: int = 0            # forward runs that failed (logged, not used as data)
     objective: str = "contour"      # what was fitted (CalibrationSettings.objective resolved)
     summary: dict | None = None     # parameters.json, once written
+    resolution: dict | None = None  # the fit on twice the particles (CalibrationSettings.resolution_check)
 
     def report(self) -> dict:
         """Values with uncertainties and what is identifiable, as written to ``parameters.json``."""
@@ -276,9 +280,21 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
             timings["space_mapping_s"] = time.perf_counter() - t3
             tell("map", 1.0)
     std = {n: float(v) for n, v in zip(space.names, unc.std)}   # inf: not seen by the data
+    resolution = None
+    if s.resolution_check:
+        t4 = time.perf_counter()
+        tell("resolution", 0.0)
+        check = resolution_check(final, space.parameters(theta), observation, int(max(frames)))
+        resolution = check.as_dict()
+        timings["resolution_check_s"] = time.perf_counter() - t4
+        tell("resolution", 1.0)
+        if not check.resolved:
+            log.warning("the fitted model is not resolved: on %d particles its points A move %.2f mm from where "
+                        "%d put them (more than a %.2f mm pixel); fit with more particles", check.particles[1],
+                        check.largest_mm, check.particles[0], check.pixel_mm)
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), fit_result, table1,
                        mapped, degeneracy, unc.correlation.round(3).tolist(), final, search, observation,
-                       ev.runs, timings, ev.failed, objective)
+                       ev.runs, timings, ev.failed, objective, resolution=resolution)
 
 
 def _reduced_search(ev: Evaluator, s: CalibrationSettings, theta0: np.ndarray, centres: list, made_s: list,

@@ -107,6 +107,11 @@ class CalibrationSettings(ConfigModel):
                                     "model — the search model at its fit or the final model at its best mapped "
                                     "parameters — fits the training frames better (both costs in parameters.json)")
     degeneracy_check: bool = Field(True, description="run and report the F–E–β1 scaling the push cannot see")
+    resolution_check: bool = Field(
+        False, description="run the fitted model at the fit again on twice the particles and report how far its "
+                           "points A move apart over the training frames (parameters.json → fit.resolution_check; "
+                           "a warning where it is more than a pixel: the model is too coarse for the fit to be "
+                           "trusted). Off by default: one run of the finer model, 2–5× the model's own")
     fit_friction: bool | None = Field(
         None, description="fit the friction of the floor and the bar's face (ln μ_f, 0.02 … 1) as a fifth "
                           "coordinate; unset: when the bar is driven (its slide is set by the friction), "

@@ -119,6 +119,7 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
                 "runs": cal.table1.runs, "events": cal.table1.events},
             "space_mapping": cal.mapped,
             "degeneracy": cal.degeneracy,
+            "resolution_check": cal.resolution,
             "correlation": {"coordinates": ["log_E", "nu", "log_beta1", "beta2"], "matrix": cal.correlation},
             "runs": cal.runs,
             "failed_runs": cal.failed_runs,

@@ -1,0 +1,78 @@
+"""Whether the fitted model is resolved: the fit run again on twice the particles.
+
+A fit can do no better than its model. Where the model's lattice is too coarse for the
+sample under its bar, the fit makes up for the discretisation with wrong parameters. The
+training frames cannot show that, since the fit matches them either way. On the slide
+slide_stop_s50 the 1,000-particle model at the true parameters missed the validation frames by
+0.47 mm and the 4,399-particle one by 0.10 mm. The fit's points A moved 0.54 mm apart between
+1,000 and 2,000 particles, against 0.09–0.18 mm on three slides the 1,000-particle model does
+resolve (docs/decisions.md, issue 41, session 38).
+
+:func:`resolution_check` runs the fitted model at the fit on the model's lattice and on one with
+``factor`` times the particles (a convergence check on the mesh, as any finite-element study
+makes). It compares the points A's motion frame by frame. A model whose own discretisation moves
+the points by more than a pixel of the frames it was fitted to cannot be fitted to pixel accuracy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from hifumotion.estimation.model import ModelSpec, Parameters, model_spec, run_model
+
+
+@dataclass(frozen=True)
+class ResolutionCheck:
+    """The fit on two lattices: ``particles`` and ``spacing_mm`` of each (the model's first),
+    ``difference_mm`` the RMS over the points A of the difference of their displacements since
+    frame 0, at each of frames 0 … ``last_frame``, and the frames' ``pixel_mm``."""
+
+    particles: tuple[int, int]
+    spacing_mm: tuple[float, float]
+    difference_mm: np.ndarray
+    pixel_mm: float
+    last_frame: int
+
+    @property
+    def largest_mm(self) -> float:
+        """The largest difference over the frames (mm)."""
+        return float(np.max(self.difference_mm, initial=0.0))
+
+    @property
+    def resolved(self) -> bool:
+        """Whether the finer lattice moves the points A by at most a pixel at every frame."""
+        return self.largest_mm <= self.pixel_mm
+
+    def as_dict(self) -> dict:
+        return {"particles": list(self.particles), "spacing_mm": list(self.spacing_mm),
+                "last_frame": self.last_frame, "difference_mm": np.round(self.difference_mm, 4).tolist(),
+                "largest_mm": self.largest_mm, "pixel_mm": self.pixel_mm, "resolved": self.resolved}
+
+
+def displacement_difference_mm(points_a_mm: np.ndarray, points_b_mm: np.ndarray) -> np.ndarray:
+    """``(F,)`` the RMS over the points of the difference between two runs' displacements since
+    their own frame 0 (mm), from two ``(F, M, 3)`` trajectories of the same points (mm)."""
+    a, b = (np.asarray(p, float) for p in (points_a_mm, points_b_mm))
+    if a.shape != b.shape or a.ndim != 3:
+        raise ValueError(f"two (F, M, 3) trajectories of the same points expected, got {a.shape} and {b.shape}")
+    d = (a - a[:1]) - (b - b[:1])
+    return np.sqrt((d ** 2).sum(axis=-1).mean(axis=-1))
+
+
+def resolution_check(spec: ModelSpec, k: Parameters, observation, last_frame: int,
+                     factor: float = 2.0) -> ResolutionCheck:
+    """The fitted model ``spec`` at ``k`` on its own lattice and on one with ``factor`` times the
+    particles, frames 0 … ``last_frame`` (module docstring). A reduced model is checked on the
+    full model it reduces: a reduced model of the finer lattice would need its own snapshots."""
+    if not factor > 1.0:
+        raise ValueError(f"the finer lattice needs more particles: factor {factor}")
+    finer = model_spec(observation, replace(spec.settings, tissue_particles=int(round(factor * spec.settings.tissue_particles))))
+    full = spec.settings.integrator == "reduced"
+    runs = [run_model(m, k, last_frame, snapshots=[] if full else None).points_mm for m in (spec, finer)]
+    return ResolutionCheck((len(spec.tissue_mm), len(finer.tissue_mm)), (spec.spacing_mm, finer.spacing_mm),
+                           displacement_difference_mm(*runs), float(observation.pixel_mm), int(last_frame))
+
+
+__all__ = ["ResolutionCheck", "resolution_check", "displacement_difference_mm"]
