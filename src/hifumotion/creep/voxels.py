@@ -154,5 +154,4 @@ def conform(mesh: VoxelMesh, surface, floor_mm: float | None = 0.0, rounds: int 
     return VoxelMesh(mesh.spacing_mm, nodes, mesh.elements, mesh.centres_mm)
 
 
-__all__ += ["PROJECTIONS"]
-__all__ += ["conform", "MIN_CORNER_JACOBIAN"]
+__all__ += ["conform", "MIN_CORNER_JACOBIAN", "PROJECTIONS"]
