@@ -623,10 +623,15 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     cal, pred = tmp_path / "cal", tmp_path / "pred"
     cli = [sys.executable, "-m", "hifumotion"]
     out = subprocess.run(cli + ["calibrate", str(folder / "observed"), "-o", str(cal), "--particles", "300",
-                                "--search-particles", "150", "--workers", "2", "--max-evaluations", "2"],
+                                "--search-particles", "150", "--workers", "2", "--max-evaluations", "2",
+                                "--set", "resolution_check=true"],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr + out.stdout
     params = json.loads((cal / "parameters.json").read_text())
+    # the fit on twice the particles, said on the console as parameters.json has it
+    rc = params["fit"]["resolution_check"]
+    assert rc["particles"][1] > 1.8 * rc["particles"][0] and len(rc["difference_mm"]) == max(default_frames(40)[0]) + 1
+    assert f"the fit's points A move {rc['largest_mm']:.2f} mm" in " ".join((out.stderr + out.stdout).split())
     for name in ("youngs_modulus_pa", "poisson_ratio", "beta1_pa_s_pow", "beta2", "external_force_n"):
         assert "value" in params["parameters"][name] and "determined" in params["parameters"][name]
     assert params["fit"]["runs"] > 5 and (cal / "search_log.jsonl").is_file()

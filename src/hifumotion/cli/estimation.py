@@ -75,7 +75,13 @@ def calibrate(
     console.print(f"calibrated on frames {summary['training_frames']} with {summary['fit']['method']} "
                   f"({summary['fit']['runs']} runs): F/E = {p['force_over_youngs_m2']['value']:.3g} m² "
                   f"(E = {p['youngs_modulus_pa']['value']:.0f} Pa at {force} N), ν = {p['poisson_ratio']['value']:.3f}, "
-                  f"β1 = {p['beta1_pa_s_pow']['value']:.3g}, β2 = {p['beta2']['value']:.2f}", highlight=False)
+                  f"β1 = {p['beta1_pa_s_pow']['value']:.3g}, β2 = {p['beta2']['value']:.2f}"
+                  + (f", μ_f = {p['friction']['value']:.3f}" if "friction" in p else ""), highlight=False)
+    rc = summary["fit"].get("resolution_check")
+    if rc:
+        console.print(f"on {rc['particles'][1]} particles the fit's points A move {rc['largest_mm']:.2f} mm from where "
+                      f"{rc['particles'][0]} put them: {'resolved' if rc['resolved'] else 'NOT resolved'} "
+                      f"(a pixel is {rc['pixel_mm']:.2f} mm)", highlight=False)
     undetermined = [n for n, v in p.items() if not v["determined"]]
     if undetermined:
         console.print(f"not determined by these frames: {', '.join(undetermined)}", highlight=False)
