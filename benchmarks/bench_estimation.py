@@ -16,8 +16,12 @@ push; finite-element truth, B-mode images), in one run:
 3. **Predict** the validation frames (110…190) and the online mode (from frame t to
    t + k, k = 4, 6, 8 frames: 200–400 ms), and score against the truth beside the
    baselines that see the same tracked frames: holding the last training contour, the
-   Kalman filter, and the NCC template tracker (which also sees the validation images:
-   a tracker, the ceiling of what observation alone gives).
+   Kalman filter, the drive surrogates (the tracked centroid regressed on the push's
+   program from ``setup.json``, static and with a first-order lag; online, the same
+   updated every frame by recursive least squares), and the NCC template tracker (which
+   also sees the validation images: a tracker, the ceiling of what observation alone gives).
+   ``surrogate_targets``: the physics' centroid ≤ ½ of the best peer's that knows the
+   same inputs and its DSC above all of them; online ≤ ½ of the online surrogate's.
 
 Prints JSON: per twin and method the recovered F/E, β1/E, ν, β2 against the truth, the
 Table 4 scores, the timings, and issue 19's targets each as true/false, with a summary
@@ -125,7 +129,7 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
     online_predictions(pred, cal.spec, ref, obs.frame_masks, horizons[:1], now)
     online_ms = 1000.0 * (time.perf_counter() - t2) / max(1, len(now))
     ev = evaluate(pred, cal.spec, ref, obs.frame_masks, observed.frames, truth, train, valid,
-                  observed.frame_interval_s, horizons, now)
+                  observed.frame_interval_s, horizons, now, program=observed.setup.program_at_frames(n))
     window_s = (valid[-1] - valid[0]) * observed.frame_interval_s
     extra = {"model_at_truth": model_at_truth(cal.spec, k, params, ref, obs, observed, truth, train, valid)
              } if at_truth else {}
@@ -136,7 +140,7 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
         "degeneracy": cal.degeneracy, "space_mapping": cal.mapped, "resolution_check": cal.resolution,
         "physics": ev.physics, "baselines_validation": ev.baselines, "online": ev.online,
-        "predict_s": predict_s, "validation_window_s": window_s,
+        "verdict": ev.physics["verdict"], "predict_s": predict_s, "validation_window_s": window_s,
         "predict_speedup_over_realtime": window_s / predict_s,
         "online_ms_per_frame": online_ms, "frame_interval_ms": 1000.0 * observed.frame_interval_s,
     }
@@ -192,6 +196,7 @@ def targets(protocol: str, r: dict) -> dict:
         f"prediction>={PREDICT_SPEEDUP:.0f}x_realtime": r["predict_speedup_over_realtime"] >= PREDICT_SPEEDUP,
         "online_at_frame_rate": r["online_ms_per_frame"] <= r["frame_interval_ms"],
     }
+    t.update(surrogate_targets(r))
     if protocol in ("slow_push", "push_release"):
         best = min(hold["centroid_mean_mm"], kal["centroid_mean_mm"])
         t["centroid<=half_of_hold_and_kalman"] = v["centroid_mean_mm"] <= 0.5 * best
@@ -208,6 +213,26 @@ def targets(protocol: str, r: dict) -> dict:
             abs(rec["beta1_over_youngs_s_pow"]["rel_error"]) <= PARAMETER_REL
         t[f"poisson_within_{POISSON_ABS}"] = abs(rec["poisson_ratio"]["fit"] - rec["poisson_ratio"]["truth"]) <= POISSON_ABS
         t[f"twin_moves>={WINDOW_MOTION_MM}mm_in_validation"] = r["validation_window_motion_mm"] >= WINDOW_MOTION_MM
+    return t
+
+
+#: the names of the peers that know the same inputs as the physics (evaluate's baselines)
+SURROGATES = ("drive_static", "drive_lagged", "kalman", "no_motion")
+
+
+def surrogate_targets(r: dict) -> dict:
+    """The physics against every predictor that knows the same inputs (the drive regressions,
+    static and lagged, the constant-velocity Kalman filter, holding still): validation centroid
+    ≤ ½ of the best one's, DSC above all; online, ≤ ½ of the online surrogate's at every horizon."""
+    v, b = r["physics"]["validation"], r["baselines_validation"]
+    peers = {name: b[name] for name in SURROGATES if name in b}
+    best = min(p["centroid_mean_mm"] for p in peers.values())
+    t = {"centroid<=half_of_best_surrogate": v["centroid_mean_mm"] <= 0.5 * best,
+         "dsc_above_every_surrogate": all(v["dsc_mean"] > p["dsc_mean"] for p in peers.values())}
+    online = [e for e in r.get("online", {}).values() if "surrogate" in e and e["surrogate"].get("frames")]
+    if online:
+        t["online_centroid<=half_of_online_surrogate"] = all(
+            e["physics"]["centroid_mean_mm"] <= 0.5 * e["surrogate"]["centroid_mean_mm"] for e in online)
     return t
 
 
@@ -286,6 +311,9 @@ def _tell(name: str, label: str, r: dict) -> None:
         at_text += f", ×2 particles moves the points {rc['largest_mm']:.3f} mm"
     print(f"{name} {label}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm"
           f"{at_text}, {fe_text}{r['calibration_s']:.0f} s", file=sys.stderr, flush=True)
+    peers = ", ".join(f"{m} {s['dsc_mean']:.4f}/{s['centroid_mean_mm']:.3f}"
+                      for m, s in r["baselines_validation"].items() if s.get("frames"))
+    print(f"    peers (DSC/centroid mm): {peers}; {r['verdict']}", file=sys.stderr, flush=True)
 
 
 def search_comparison(reduced: dict, implicit: dict) -> dict:

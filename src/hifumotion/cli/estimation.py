@@ -239,3 +239,8 @@ def online(
                   f"the 99th percentile (tracking included), {summary['frames_late']} after the next frame was due; "
                   f"push at {summary['push_scale_last']:.2f} × the calibrated one at the end; online.csv and "
                   f"online.png in {output.resolve()}", highlight=False)
+    for k, h in summary["horizons"].items():
+        sur = h.get("surrogate_error_vs_tracked_mean_mm")
+        sur_text = "" if sur is None else f", the drive surrogate {sur:.3f} mm"
+        console.print(f"{h['ms']:.0f} ms ahead, against the tracked section: physics {h['error_vs_tracked_mean_mm']:.3f} "
+                      f"mm, holding still {h['hold_error_vs_tracked_mean_mm']:.3f} mm{sur_text}", highlight=False)

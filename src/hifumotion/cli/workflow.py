@@ -62,6 +62,8 @@ def demo(
     console.print(f"validation DSC {v['validation_dsc_mean']:.4f} (min {v['validation_dsc_min']:.4f}), centroid error "
                   f"{v['validation_centroid_mean_mm']:.2f} mm; no motion {v['no_motion_validation_dsc_mean']:.4f}, "
                   f"Kalman {v['kalman_validation_dsc_mean']:.4f}; the physics is {_verdict(v)}", highlight=False)
+    if v.get("verdict"):
+        console.print(f"of every predictor: {v['verdict']}", highlight=False)
     console.print(f"open {root / 'report' / 'report.html'} — the report; prediction/tissue.pvd in ParaView; "
                   f"calibration/observation/tissue_volume.nii.gz in 3D Slicer; all in {root}", highlight=False)
 
@@ -99,6 +101,8 @@ def run(
     console.print(f"validation DSC {v['validation_dsc_mean']:.4f} (min {v['validation_dsc_min']:.4f}) against the "
                   f"{v['truth']}; no motion {v['no_motion_validation_dsc_mean']:.4f}; the physics is {_verdict(v)}",
                   highlight=False)
+    if v.get("verdict"):
+        console.print(f"of every predictor: {v['verdict']}", highlight=False)
     console.print(f"open {target.resolve() / 'report' / 'report.html'}; all results in {target.resolve()}",
                   highlight=False)
 

@@ -127,6 +127,20 @@ class PushSchedule(ConfigModel):
                 raise ValueError("relative_force must lie in 0 … 1 with a positive peak")
         return self
 
+    def program(self, times_s) -> np.ndarray:
+        """The push's known program at ``times_s`` (s from the push's start): the driven bar's
+        travel in mm (travel control), or the force over its unknown peak, 0 … 1 (force
+        control). What the operator knows before the push; a surrogate predictor regresses the
+        target's motion on it (:mod:`hifumotion.prediction.surrogates`)."""
+        t = np.asarray(times_s, float)
+        if self.control == "travel":
+            return np.interp(t, self.times_s, self.travel_mm)
+        if self.shape == "piecewise_linear":
+            return np.interp(t, self.times_s, self.relative_force)
+        if self.ramp_s > 0:
+            return np.clip(t / self.ramp_s, 0.0, 1.0)
+        return np.where(t >= 0, 1.0, 0.0)
+
     def schedule(self, peak_force_n: float) -> dict:
         """The :class:`~hifumotion.particles.scene.BarConfig` fields of this shape at ``peak_force_n``
         (travel control: the travel itself; no force is read)."""
@@ -175,6 +189,12 @@ class Setup(ConfigModel):
     @property
     def pixel_mm(self) -> float:
         return self.imaging.pixel_mm
+
+    def program_at_frames(self, frames: int | None = None) -> np.ndarray:
+        """``(frames,)`` the push's known program (:meth:`PushSchedule.program`) at frames
+        0 … frames − 1 (default: every frame of the series), frame t at t × frame_interval_s."""
+        n = self.frames if frames is None else int(frames)
+        return self.push.program(np.arange(n) * self.frame_interval_s)
 
     @property
     def image_origin_mm(self) -> np.ndarray:

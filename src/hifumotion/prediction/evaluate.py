@@ -6,11 +6,15 @@ One function, :func:`evaluate`, used by the end-to-end pipeline (``hifumotion de
 * the physics per frame (DSC, HD95, centroid error in mm) on the training and the
   validation frames (:func:`~hifumotion.scoring.score_masks`);
 * the baselines on the validation window, from the same observation the physics had
-  (frame 0 and the training frames): **no motion** (the last training contour held) and
-  a **Kalman** filter on the contour's centroid and shape;
+  (frame 0 and the training frames): **no motion** (the last training contour held),
+  a **Kalman** filter on the contour's centroid and shape and, where the push's program is
+  known, the **surrogates** — the tracked centroid regressed on the program, static and
+  lagged (:mod:`~hifumotion.prediction.surrogates`);
+* the physics' margin over each, and the ranking of all by the validation centroid error;
 * the **online** mode: at each frame t, predict t + k from what was seen up to t — the
   physics re-anchored on the tracked frame t, holding frame t, the **NCC** template
-  tracker's frame t, and a Kalman filter over the last ten tracked frames.
+  tracker's frame t, a Kalman filter over the last ten tracked frames and, with the
+  program, the surrogate updated at every frame (recursive least squares).
 """
 
 from __future__ import annotations
@@ -78,8 +82,33 @@ class Evaluation:
                 "per_frame": self.table.rows}
 
 
+def ranking(physics: dict, baselines: dict) -> list[dict]:
+    """The physics and every baseline ordered by validation centroid error (then DSC), each
+    ``{"method", "centroid_mean_mm", "dsc_mean"}``; the first is the best."""
+    rows = [{"method": "physics", "centroid_mean_mm": physics.get("centroid_mean_mm"),
+             "dsc_mean": physics.get("dsc_mean")}]
+    rows += [{"method": name, "centroid_mean_mm": s.get("centroid_mean_mm"), "dsc_mean": s.get("dsc_mean")}
+             for name, s in baselines.items()]
+    rows = [r for r in rows if r["centroid_mean_mm"] is not None]
+    return sorted(rows, key=lambda r: (r["centroid_mean_mm"], -(r["dsc_mean"] or 0.0)))
+
+
+def verdict(rank: list[dict]) -> str:
+    """One line: which predictor the validation frames favour, by how much, on which metric."""
+    if not rank:
+        return "nothing to rank"
+    best = rank[0]
+    name = best["method"].replace("_", " ")
+    if len(rank) == 1:
+        return f"{name}: centroid {best['centroid_mean_mm']:.3f} mm"
+    second = rank[1]
+    ratio = second["centroid_mean_mm"] / best["centroid_mean_mm"] if best["centroid_mean_mm"] > 0 else float("inf")
+    return (f"{name} predicts best by the centroid: {best['centroid_mean_mm']:.3f} mm, {ratio:.1f}× better than "
+            f"{second['method'].replace('_', ' ')} ({second['centroid_mean_mm']:.3f} mm)")
+
+
 def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, truth: dict, training, validation,
-             frame_interval_s: float, horizons=(), online_from=()) -> Evaluation:
+             frame_interval_s: float, horizons=(), online_from=(), program: np.ndarray | None = None) -> Evaluation:
     """Score ``pred`` (:class:`~hifumotion.prediction.physics.Prediction`) and the baselines.
 
     Parameters
@@ -97,9 +126,14 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
         Frame numbers of the two sets.
     horizons, online_from
         Online mode: horizons k (frames) and the frames t it predicts t + k from.
+    program
+        ``(T,)`` the push's known program at every frame
+        (:meth:`~hifumotion.observed.setup.PushSchedule.program`): with it the surrogates
+        are scored beside the physics.
     """
     from hifumotion.prediction.baselines import hold_last, kalman_predict, ncc_track
     from hifumotion.prediction.pipeline import online_predictions
+    from hifumotion.prediction.surrogates import drive_regression_predict
 
     pixel = float(pred.pixel_mm)
     training, validation = [int(f) for f in training], [int(f) for f in validation]
@@ -110,8 +144,18 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     seen = {f: tracked[f] for f in [0, *training]}
     masks = {"no_motion": hold_last(seen, validation),
              "kalman": kalman_predict(seen, validation, frame_interval_s, pixel)}
+    fits = {}
+    if program is not None:
+        for lagged in (False, True):
+            m, fit = drive_regression_predict(seen, validation, program, frame_interval_s, pixel, lagged)
+            masks[fit.name], fits[fit.name] = m, fit.as_dict()
     baselines = {name: summary(m, truth, pixel, validation) for name, m in masks.items()}
+    for name, fit in fits.items():
+        baselines[name]["fit"] = fit
     physics["margin_over_no_motion"] = margin_over(pred.masks, masks["no_motion"], truth, pixel, validation)
+    physics["margin_over"] = {name: margin_over(pred.masks, m, truth, pixel, validation) for name, m in masks.items()}
+    physics["ranking"] = ranking(physics["validation"], baselines)
+    physics["verdict"] = verdict(physics["ranking"])
 
     online: dict = {}
     physics_online: dict = {}
@@ -120,6 +164,8 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     if horizons and now:
         physics_online = online_predictions(pred, spec, reference, tracked, list(horizons), now)
         ncc = ncc_track(images, tracked[0])
+        if program is not None:
+            surrogate = _online_surrogate(tracked, program, frame_interval_s, pixel, horizons, training)
         for h in horizons:
             targets = [t + h for t in now if t + h < n and t + h in physics_online[h] and t + h in truth]
             entry: dict = {"horizon_frames": int(h), "horizon_ms": 1000.0 * h * frame_interval_s}
@@ -132,8 +178,28 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
                     past = {f: tracked[f] for f in range(max(0, t - 10), t + 1)}
                     kalman.update(kalman_predict(past, [t + h], frame_interval_s, pixel))
             entry["kalman"] = summary(kalman, truth, pixel, targets)
+            if program is not None:
+                entry["surrogate"] = summary({t + h: surrogate(t, h) for t in now if t + h in targets},
+                                             truth, pixel, targets)
             online[str(h)] = entry
     return Evaluation(table, physics, baselines, online, masks, physics_online)
+
+
+def _online_surrogate(tracked: np.ndarray, program: np.ndarray, frame_interval_s: float, pixel_mm: float, horizons,
+                      training):
+    """The online surrogate over the tracked frames (causal: the aim at t from frames ≤ t), its
+    memory the training window's span: ``(t, k) -> mask`` (the tracked frame t moved to the aim)."""
+    from hifumotion.metrics import centroid
+    from hifumotion.prediction.surrogates import online_drive_regression, shift_mask
+
+    c = np.array([centroid(m, pixel_mm) if m.any() else (np.nan, np.nan) for m in tracked], float)
+    memory_s = max(max(training) - min(training), 1) * frame_interval_s
+    aims = online_drive_regression(c, program, frame_interval_s, horizons, memory_s)
+
+    def mask(t: int, k: int) -> np.ndarray:
+        shift = aims[k][t] - c[t]
+        return shift_mask(tracked[t], shift, pixel_mm) if np.isfinite(shift).all() else tracked[t]
+    return mask
 
 
 def online_schedule(training, validation, horizons, n_frames: int, samples: int = 40) -> tuple[list[int], list[int]]:
@@ -148,4 +214,4 @@ def online_schedule(training, validation, horizons, n_frames: int, samples: int 
     return now, keep
 
 
-__all__ = ["Evaluation", "evaluate", "summary", "margin_over", "online_schedule"]
+__all__ = ["Evaluation", "evaluate", "summary", "margin_over", "online_schedule", "ranking", "verdict"]

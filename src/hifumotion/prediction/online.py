@@ -15,6 +15,11 @@ frame as it arrives (:meth:`OnlineSession.push`):
    t moved by the model's motion from t to t + k: the present from the image, the motion
    ahead from the physics.
 
+Beside the physics, the session runs the **surrogate** that knows the same inputs: the tracked
+centroid regressed on the push's known program, updated at every frame by recursive least squares
+(:class:`~hifumotion.prediction.surrogates.OnlineDriveRegression`); its aims are recorded beside
+the physics' (``surrogate_mm``), outside the physics' latency.
+
 Each frame's wall time, from the frame in memory to its aims, is its latency (tracking
 included). :func:`online_loop` replays a recorded cine through a session; ``hifumotion
 online`` replays one, at its frame rate if asked, or watches a folder a scanner writes into
@@ -56,6 +61,9 @@ class OnlineResult:
     tracking_ms, filter_ms
         The parts of each frame's latency: speckle tracking, and the filter's step (with the
         predictions).
+    surrogate_mm
+        horizon k → ``(len(frames), 2)`` the online surrogate's aim at t + k (the tracked
+        centroid regressed on the known program; NaN where nothing was tracked yet).
     """
 
     frames: np.ndarray
@@ -69,6 +77,7 @@ class OnlineResult:
     tracking_ms: np.ndarray
     filter_ms: np.ndarray
     stats: dict = field(default_factory=dict)
+    surrogate_mm: dict = field(default_factory=dict)
 
     @property
     def tracking_ms_per_frame(self) -> float:
@@ -102,6 +111,17 @@ class OnlineResult:
         out[ok] = np.linalg.norm(self.tracked_mm[self.frames[ok]] - actual[target[ok]], axis=1)
         return out
 
+    def surrogate_errors_mm(self, k: int, truth_mm: np.ndarray | None = None) -> np.ndarray:
+        """The same for the online surrogate's aim: |surrogate(t + k) − actual(t + k)|."""
+        actual = self._actual(truth_mm)
+        target = self.frames + k
+        out = np.full(len(self.frames), np.nan)
+        if k not in self.surrogate_mm:
+            return out
+        ok = target < len(actual)
+        out[ok] = np.linalg.norm(self.surrogate_mm[k][ok] - actual[target[ok]], axis=1)
+        return out
+
     def summary(self) -> dict:
         """Latency (median, 99th percentile, tracking included; the frames whose aims came after
         the next frame was due), the push's last scale and, per horizon, the mean error against
@@ -121,6 +141,10 @@ class OnlineResult:
             out["horizons"][str(k)] = {"ms": 1000.0 * k * self.frame_interval_s,
                                        "error_vs_tracked_mean_mm": float(np.nanmean(e)),
                                        "hold_error_vs_tracked_mean_mm": float(np.nanmean(h))}
+            if k in self.surrogate_mm:
+                sur = self.surrogate_errors_mm(k)
+                out["horizons"][str(k)]["surrogate_error_vs_tracked_mean_mm"] = \
+                    float(np.nanmean(sur)) if np.isfinite(sur).any() else None
         return out
 
     def to_csv(self) -> str:
@@ -129,7 +153,7 @@ class OnlineResult:
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(["frame", "time_s", "horizon_frames", "horizon_ms", "target_frame", "predicted_x_mm",
                     "predicted_y_mm", "tracked_x_mm", "tracked_y_mm", "error_mm", "push_scale", "push_scale_std",
-                    "latency_ms", "tracking_ms", "filter_ms"])
+                    "latency_ms", "tracking_ms", "filter_ms", "surrogate_x_mm", "surrogate_y_mm"])
         dt = self.frame_interval_s
         for i, t in enumerate(self.frames):
             for k in sorted(self.predicted_mm):
@@ -143,6 +167,9 @@ class OnlineResult:
                     row += ["", "", ""]
                 row += [f"{self.scale[i]:.5f}", f"{self.scale_std[i]:.5f}", f"{self.latency_ms[i]:.3f}",
                         f"{self.tracking_ms[i]:.3f}", f"{self.filter_ms[i]:.3f}"]
+                sur = self.surrogate_mm.get(k)
+                row += ([f"{sur[i][0]:.4f}", f"{sur[i][1]:.4f}"] if sur is not None and np.isfinite(sur[i]).all()
+                        else ["", ""])
                 w.writerow(row)
         return buf.getvalue()
 
@@ -155,7 +182,8 @@ class OnlineStep:
     ``predicted_mm``: horizon k (frames) → the predicted section centroid at t + k (the aim);
     ``tracked_mm``: the tracked section's centroid at t; ``scale``/``scale_std``: the push's
     estimated scale; ``tracking_ms``/``filter_ms``/``latency_ms``: the frame's wall times
-    (the latency from the frame in memory to its aims, tracking included)."""
+    (the latency from the frame in memory to its aims, tracking included); ``surrogate_mm``:
+    horizon k → the online surrogate's aim at t + k."""
 
     frame: int
     time_s: float
@@ -166,6 +194,7 @@ class OnlineStep:
     tracking_ms: float
     filter_ms: float
     latency_ms: float
+    surrogate_mm: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         """A JSON-ready record (``hifumotion online --stream`` prints one a line)."""
@@ -173,7 +202,8 @@ class OnlineStep:
                 "aim_mm": {str(k): [round(float(v), 4) for v in p] for k, p in self.predicted_mm.items()},
                 "tracked_mm": [round(float(v), 4) for v in self.tracked_mm],
                 "push_scale": round(self.scale, 5), "push_scale_std": round(self.scale_std, 5),
-                "latency_ms": round(self.latency_ms, 3)}
+                "latency_ms": round(self.latency_ms, 3),
+                "surrogate_aim_mm": {str(k): [round(float(v), 4) for v in p] for k, p in self.surrogate_mm.items()}}
 
 
 class OnlineSession:
@@ -199,10 +229,14 @@ class OnlineSession:
         default ``setup.frames``. Frames past it are still taken.
     settings
         The filter's (:class:`~hifumotion.prediction.assimilate.AssimilationSettings`).
+    surrogate_memory_s
+        The online surrogate's memory (s); default the span of the paper's training frames
+        scaled to ``setup.frames`` (the data the offline surrogate and the calibration see).
     """
 
     def __init__(self, spec, k, setup, frame0: np.ndarray, mask0: np.ndarray, horizons_frames, *,
-                 frames_expected: int | None = None, settings=None, progress=None):
+                 frames_expected: int | None = None, settings=None, progress=None,
+                 surrogate_memory_s: float | None = None):
         import time
 
         from hifumotion.contour import Contour
@@ -255,6 +289,19 @@ class OnlineSession:
         # the predicted section: the tracked frame-0 section moved as the polygon of the points A
         self.base = self.tracked0 - polygon_centroid(self.a0)
         self.steps: list[OnlineStep] = []
+        self.surrogate = self._surrogate(setup, last, surrogate_memory_s)
+        self.surrogate.update(0, self.tracked0)
+
+    def _surrogate(self, setup, last: int, memory_s: float | None):
+        """The online surrogate on ``setup``'s program over the frames the session expects."""
+        from hifumotion.estimation.protocol import default_frames
+        from hifumotion.prediction.surrogates import OnlineDriveRegression
+
+        if memory_s is None:
+            training = default_frames(setup.frames)[0] if setup.frames >= 20 else [0, setup.frames - 1]
+            memory_s = max(max(training) - min(training), 1) * self.dt
+        program = setup.push.program(np.arange(last + max(self.horizons) + 1) * self.dt)
+        return OnlineDriveRegression(program, self.dt, memory_s)
 
     @classmethod
     def start(cls, spec, k, setup, frame0: np.ndarray, initial_contour, horizons_frames, *,
@@ -319,8 +366,11 @@ class OnlineSession:
             # the tracked section (for the record and the hold baseline: not on the aim's path)
             tracked = tracked_section()
         t = len(self.steps) + 1
+        # the surrogate that knows the same inputs, beside the physics (outside its latency)
+        self.surrogate.update(t, tracked)
+        surrogate = self.surrogate.predict(t, self.horizons)
         step = OnlineStep(t, t * self.dt, predicted, tracked, est.scale, est.scale_std,
-                          1000.0 * (tracked_at - started), est.latency_ms, 1000.0 * (aimed - started))
+                          1000.0 * (tracked_at - started), est.latency_ms, 1000.0 * (aimed - started), surrogate)
         self.steps.append(step)
         return step
 
@@ -334,7 +384,8 @@ class OnlineSession:
                             np.array([s.scale for s in steps]), np.array([s.scale_std for s in steps]),
                             np.array([s.latency_ms for s in steps]), self.construction_s,
                             np.array([s.tracking_ms for s in steps]), np.array([s.filter_ms for s in steps]),
-                            dict(self.filter.stats))
+                            dict(self.filter.stats),
+                            {h: np.array([s.surrogate_mm[h] for s in steps]).reshape(-1, 2) for h in self.horizons})
 
 
 def online_loop(spec, k, observation, horizons_frames, settings=None, progress=None) -> OnlineResult:

@@ -178,24 +178,37 @@ def _baseline_parts(outcome, folder: Path) -> list[str]:
     best = max(rows, key=lambda r: r[1] if r[1] is not None else -1)[0]
     parts = [table(["method", "DSC mean", "DSC min", "HD95 mean (mm)", "centroid mean (mm)", "centroid max (mm)"],
                    rows, f"Validation frames {outcome.validation}: best mean DSC — {best}")]
+    if ev.physics.get("verdict"):
+        parts.append(paragraph(f"Of every predictor, by the validation centroid error: {ev.physics['verdict']}."))
     parts.append(paragraph("No motion holds the last training contour; the Kalman filter runs on the contour's "
-                           "centroid and radial shape, both from the same contours the physics was fitted to."))
+                           "centroid and radial shape; the drive surrogates regress the tracked centroid on the "
+                           "push's known program (setup.json), static and with a first-order lag, and move the "
+                           "last training contour by it — all from the same contours the physics was fitted to."))
     if ev.online:
+        methods = [m for m in ("physics", "no_motion", "ncc", "kalman", "surrogate")
+                   if all(m in e for e in ev.online.values())]
+        label = {"physics": "physics", "no_motion": "no motion", "ncc": "NCC", "kalman": "Kalman",
+                 "surrogate": "surrogate"}
         rows = []
         for h, e in sorted(ev.online.items(), key=lambda kv: int(kv[0])):
             rows.append([f"{e['horizon_frames']} frames ({e['horizon_ms']:.0f} ms)"]
-                        + [e[m].get("dsc_mean") for m in ("physics", "no_motion", "ncc", "kalman")]
-                        + [e[m].get("centroid_mean_mm") for m in ("physics", "no_motion", "ncc", "kalman")])
+                        + [e[m].get("dsc_mean") for m in methods]
+                        + [e[m].get("centroid_mean_mm") for m in methods])
         parts.append("<h3>Online mode</h3>")
         parts.append(paragraph("At each frame t, knowing the frames up to t, predict frame t + k: the physics "
-                               "re-anchored on the tracked frame t, holding frame t, the NCC template tracker, and "
-                               "a Kalman filter over the last ten frames."))
-        parts.append(table(["horizon", "DSC physics", "DSC no motion", "DSC NCC", "DSC Kalman", "centroid physics (mm)",
-                            "centroid no motion (mm)", "centroid NCC (mm)", "centroid Kalman (mm)"], rows,
+                               "re-anchored on the tracked frame t, holding frame t, the NCC template tracker, "
+                               "a Kalman filter over the last ten frames and, where the program is known, the "
+                               "drive surrogate updated at every frame (recursive least squares)."))
+        parts.append(table(["horizon"] + [f"DSC {label[m]}" for m in methods]
+                           + [f"centroid {label[m]} (mm)" for m in methods], rows,
                            "Online prediction error against the horizon"))
         parts.append(figure(figures.online_horizons(ev.online, folder / "online.png").name,
                             "Online mode: error against the horizon"))
     return parts
+
+
+def _nanmean(values: np.ndarray) -> float | None:
+    return float(np.nanmean(values)) if np.isfinite(values).any() else None
 
 
 def _online_loop_parts(result, inputs: ReportInputs, folder: Path) -> list[str]:
@@ -203,22 +216,27 @@ def _online_loop_parts(result, inputs: ReportInputs, folder: Path) -> list[str]:
     push's scale, the latency histogram and each horizon's error beside holding still."""
     truth = inputs.true_centroid_mm
     s = result.summary()
+    surrogate = bool(result.surrogate_mm)
     rows = []
     for k in sorted(result.predicted_mm):
         row = [f"{k} frames ({1000 * k * result.frame_interval_s:.0f} ms)"]
+        methods = [result.errors_mm, result.hold_errors_mm] + ([result.surrogate_errors_mm] if surrogate else [])
         if truth is not None:
-            row += [float(np.nanmean(result.errors_mm(k, truth))), float(np.nanmean(result.hold_errors_mm(k, truth)))]
-        row += [float(np.nanmean(result.errors_mm(k))), float(np.nanmean(result.hold_errors_mm(k)))]
+            row += [_nanmean(m(k, truth)) for m in methods]
+        row += [_nanmean(m(k)) for m in methods]
         rows.append(row)
-    head = ["horizon"] + (["filter vs truth (mm)", "holding vs truth (mm)"] if truth is not None else []) + [
-        "filter vs tracked (mm)", "holding vs tracked (mm)"]
+    names = ["filter", "holding"] + (["surrogate"] if surrogate else [])
+    head = ["horizon"] + ([f"{n} vs truth (mm)" for n in names] if truth is not None else []) + [
+        f"{n} vs tracked (mm)" for n in names]
     lat = s["latency_with_tracking_ms"]
     return [
         paragraph("Frame by frame, as a scanner would deliver them: the tracked displacement of the contour points "
                   "corrects the reduced model's state and the push's size (an extended Kalman filter), then the "
                   "section t + k is predicted — the aim before frame t + 1 arrives. Errors are the centroid's "
                   "motion since frame 0 (against the truth's where it is known, and against the tracking's), "
-                  "from frame 1 on; where the two disagree, the tracking is the one that misses what the bar hides."),
+                  "from frame 1 on; where the two disagree, the tracking is the one that misses what the bar hides. "
+                  "The surrogate knows the same inputs without a tissue model: the tracked centroid regressed on "
+                  "the push's known program, updated at every frame (recursive least squares)."),
         table(head, rows, "Online loop: centroid error of the prediction against the horizon"),
         paragraph(f"Latency a frame, tracking included: {fmt(lat['median'], 3)} ms at the median, "
                   f"{fmt(lat['p99'], 3)} ms at the 99th percentile (tracking {fmt(s['tracking_ms_per_frame'], 3)} ms "

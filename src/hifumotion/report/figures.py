@@ -11,7 +11,7 @@ import numpy as np
 
 #: Colours of the methods in every plot (physics red as in Fig. 4; truth green).
 COLOURS = {"physics": "tab:red", "no_motion": "tab:grey", "kalman": "tab:blue", "ncc": "tab:purple",
-           "truth": "tab:green"}
+           "truth": "tab:green", "drive_static": "tab:orange", "drive_lagged": "tab:brown", "surrogate": "tab:orange"}
 
 
 def _pyplot():
@@ -127,7 +127,7 @@ def online_horizons(online: dict, path: str | Path) -> Path:
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4))
     entries = sorted(online.values(), key=lambda e: e["horizon_ms"])
     ms = [e["horizon_ms"] for e in entries]
-    for name in ("physics", "no_motion", "ncc", "kalman"):
+    for name in [m for m in ("physics", "no_motion", "ncc", "kalman", "surrogate") if all(m in e for e in entries)]:
         dsc = [e[name].get("dsc_mean", np.nan) for e in entries]
         cen = [e[name].get("centroid_mean_mm", np.nan) for e in entries]
         axes[0].plot(ms, dsc, "o-", color=COLOURS[name], label=name.replace("_", " "))

@@ -182,7 +182,8 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
             truth_masks = {f: observation.frame_masks[f] for f in range(n)}
             truth_kind = "tracked contours"
         ev = evaluate(pred, cal.spec, reference, observation.frame_masks, observed.frames, truth_masks,
-                      training, validation, observed.frame_interval_s, s.horizons_frames, now)
+                      training, validation, observed.frame_interval_s, s.horizons_frames, now,
+                      program=observed.setup.program_at_frames(n))
         if ev.online_masks:
             write_text(folder / "online.csv", online_csv(ev.online_masks, observation.frame_masks, pred.pixel_mm,
                                                          observed.frame_interval_s))
@@ -208,6 +209,8 @@ def outcome_summary(o: PipelineOutcome) -> dict:
            "no_motion_validation_dsc_mean": o.evaluation.baselines["no_motion"].get("dsc_mean"),
            "kalman_validation_dsc_mean": o.evaluation.baselines["kalman"].get("dsc_mean"),
            "physics_vs_no_motion": margin.get("verdict"),
+           "verdict": o.evaluation.physics.get("verdict"),
+           "ranking": [r["method"] for r in o.evaluation.physics.get("ranking", [])],
            "dsc_margin_over_no_motion": margin.get("dsc_margin_mean"),
            "dsc_margin_spread": margin.get("dsc_margin_std"),
            "centroid_margin_over_no_motion_mm": margin.get("centroid_margin_mean_mm"),
