@@ -89,6 +89,12 @@ def test_shift_mask_moves_by_subpixel_amounts():
     m = disc((60, 60), (30, 30), 10)
     moved = shift_mask(m, (0.25, -0.5), 0.1)          # 2.5 px right, 5 px up
     np.testing.assert_allclose(np.subtract(centroid(moved, 0.1), centroid(m, 0.1)), (0.25, -0.5), atol=0.02)
+    # below half a pixel: a lobed section's centroid follows the asked shift, not the pixel grid
+    yy, xx = np.mgrid[:90, :90]
+    lobed = np.hypot(xx - 45.3, yy - 44.6) <= 16 + 3 * np.cos(3 * np.arctan2(yy - 44.6, xx - 45.3))
+    for shift_px in (0.15, 0.3, 0.45):
+        moved = np.subtract(centroid(shift_mask(lobed, (shift_px, -0.5 * shift_px), 1.0), 1.0), centroid(lobed, 1.0))
+        np.testing.assert_allclose(moved, (shift_px, -0.5 * shift_px), atol=0.1)
 
 
 def test_recursive_least_squares_without_forgetting_is_the_batch_fit():

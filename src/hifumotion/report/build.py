@@ -144,7 +144,7 @@ def _parameter_parts(outcome) -> list[str]:
 
 
 def _prediction_parts(outcome, truth: dict, folder: Path) -> list[str]:
-    from hifumotion.metrics import dice
+    from hifumotion.metrics import centroid_distance, dice
 
     ev = outcome.evaluation
     rows = [[r["frame"], r["set"], r["dsc"], r["hd95_mm"], r["centroid_error_mm"]] for r in ev.table.rows]
@@ -154,13 +154,21 @@ def _prediction_parts(outcome, truth: dict, folder: Path) -> list[str]:
         parts.append(paragraph("No independent truth was given: the scores compare the prediction with the "
                                "tracked contours, which include the tracking's own error.", "note"))
     frames = [r["frame"] for r in ev.table.rows]
-    baseline_curves = {}
+    baseline_curves, centroid_curves = {}, {}
+    pixel = float(outcome.prediction.pixel_mm)
     for name, masks in ev.baseline_masks.items():
         f = [fr for fr in outcome.validation if fr in masks and fr in truth]
         baseline_curves[name] = (f, [dice(masks[fr], truth[fr]) for fr in f])
+        f = [fr for fr in f if masks[fr].any() and truth[fr].any()]
+        centroid_curves[name] = (f, [centroid_distance(masks[fr], truth[fr], pixel) for fr in f])
     parts.append(figure(figures.dsc_per_frame(frames, [r["dsc"] for r in ev.table.rows], baseline_curves,
                                               folder / "dsc_per_frame.png", outcome.training, outcome.validation).name,
                         "Table 4 as a plot: DSC per frame, training then validation; baselines on the validation frames"))
+    parts.append(figure(figures.centroid_error_per_frame(frames, [r["centroid_error_mm"] for r in ev.table.rows],
+                                                         centroid_curves, folder / "centroid_per_frame.png",
+                                                         outcome.training, outcome.validation).name,
+                        "Where each predictor would aim: centroid error per frame, the physics beside every baseline "
+                        "(the drive surrogates among them where the push's program is known)"))
     parts.append(table(["frame", "set", "DSC", "HD95 (mm)", "centroid error (mm)"], rows, "Table 4: per frame"))
     parts.append(figure(_copy(outcome.folders["scores"] / "overlays.png", folder),
                         "Figure 4: true (green) and predicted (red) contours on the observed frames"))

@@ -71,6 +71,16 @@ def mesh_picture(vertices_mm: np.ndarray, faces: np.ndarray, path: str | Path, t
 
 def dsc_per_frame(frames, physics, baselines: dict, path: str | Path, training=(), validation=()) -> Path:
     """Table 4 as a plot: the physics' DSC per frame, the baselines' on the validation frames."""
+    return _per_frame(frames, physics, baselines, path, training, validation, "DSC", "lower left")
+
+
+def centroid_error_per_frame(frames, physics, baselines: dict, path: str | Path, training=(), validation=()) -> Path:
+    """Where each predictor would aim: the centroid error (mm) per frame, the physics' and the
+    baselines' (on the validation frames)."""
+    return _per_frame(frames, physics, baselines, path, training, validation, "centroid error (mm)", "upper left")
+
+
+def _per_frame(frames, physics, baselines: dict, path, training, validation, ylabel: str, legend: str) -> Path:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 3.6))
     if len(training) and len(validation):
@@ -83,8 +93,8 @@ def dsc_per_frame(frames, physics, baselines: dict, path: str | Path, training=(
     for name, (f, d) in baselines.items():
         ax.plot(f, d, "s--", color=COLOURS.get(name, None), label=name.replace("_", " "), markersize=4)
     ax.set_xlabel("frame")
-    ax.set_ylabel("DSC")
-    ax.legend(fontsize=8, loc="lower left")
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=8, loc=legend)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return _save(fig, path)
@@ -142,7 +152,7 @@ def online_horizons(online: dict, path: str | Path) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["mesh_picture", "dsc_per_frame", "aim_trajectory", "online_horizons", "online_figure"]
+__all__ = ["mesh_picture", "dsc_per_frame", "centroid_error_per_frame", "aim_trajectory", "online_horizons", "online_figure"]
 
 
 def online_figure(result, path: str | Path, truth_mm: np.ndarray | None = None) -> Path:
