@@ -104,9 +104,11 @@ def observe(twin: Path, training: str, tracking: str, offset_mm: float, fill_bar
 
 
 def calibrate_and_predict(observed, obs, train, valid, truth, params, method, workers, horizons, tmp,
-                          settings: dict | None = None, at_truth: bool = False) -> dict:
+                          settings: dict | None = None, at_truth: bool = False, choose: bool = False) -> dict:
     """One method on one observation: calibration, prediction, Table 4, online mode; with
-    ``at_truth`` the fitted model at the twin's true parameters too (:func:`model_at_truth`)."""
+    ``at_truth`` the fitted model at the twin's true parameters too (:func:`model_at_truth`); with
+    ``choose`` the product's choice of predictor on a temporal hold-out of the training frames
+    (:mod:`hifumotion.prediction.choice`: one more calibration, on the earlier frames)."""
     from hifumotion.estimation.calibrate import CalibrationSettings, calibrate, recovered_parameters
     from hifumotion.prediction.evaluate import evaluate, online_schedule
     from hifumotion.prediction.pipeline import online_predictions, predict_calibrated
@@ -128,8 +130,19 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
     t2 = time.perf_counter()
     online_predictions(pred, cal.spec, ref, obs.frame_masks, horizons[:1], now)
     online_ms = 1000.0 * (time.perf_counter() - t2) / max(1, len(now))
+    program = observed.setup.program_at_frames(n)
+    choice, choice_s = None, None
+    if choose:
+        from hifumotion.prediction.choice import holdout_physics, rank_on_holdout
+
+        t3 = time.perf_counter()
+        held = holdout_physics(obs, CalibrationSettings(method=method, training_frames=train, workers=workers,
+                                                        **(settings or {})), train, log_path=tmp / f"holdout_{method}.jsonl")
+        tracked = {f: obs.frame_masks[f] for f in range(n)}
+        choice = rank_on_holdout(tracked, train, program, observed.frame_interval_s, float(observed.pixel_mm), held)
+        choice_s = time.perf_counter() - t3
     ev = evaluate(pred, cal.spec, ref, obs.frame_masks, observed.frames, truth, train, valid,
-                  observed.frame_interval_s, horizons, now, program=observed.setup.program_at_frames(n))
+                  observed.frame_interval_s, horizons, now, program=program, choice=choice)
     window_s = (valid[-1] - valid[0]) * observed.frame_interval_s
     extra = {"model_at_truth": model_at_truth(cal.spec, k, params, ref, obs, observed, truth, train, valid)
              } if at_truth else {}
@@ -140,7 +153,8 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
         "degeneracy": cal.degeneracy, "space_mapping": cal.mapped, "resolution_check": cal.resolution,
         "physics": ev.physics, "baselines_validation": ev.baselines, "online": ev.online,
-        "verdict": ev.physics["verdict"], "predict_s": predict_s, "validation_window_s": window_s,
+        "verdict": ev.physics["verdict"], "choice": ev.physics.get("choice"), "choice_s": choice_s,
+        "predict_s": predict_s, "validation_window_s": window_s,
         "predict_speedup_over_realtime": window_s / predict_s,
         "online_ms_per_frame": online_ms, "frame_interval_ms": 1000.0 * observed.frame_interval_s,
     }
@@ -233,6 +247,10 @@ def surrogate_targets(r: dict) -> dict:
     if online:
         t["online_centroid<=half_of_online_surrogate"] = all(
             e["physics"]["centroid_mean_mm"] <= 0.5 * e["surrogate"]["centroid_mean_mm"] for e in online)
+    choice = r.get("choice")
+    if choice and "excess_over_best_mm" in choice:
+        # the product's choice no worse than the validation's best predictor by more than the spread
+        t["choice_within_spread_of_the_best"] = choice["excess_over_best_mm"] <= choice["excess_spread_mm"]
     return t
 
 
@@ -266,7 +284,7 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
     horizons = [int(h) for h in args.horizons.split(",")]
     for method in args.methods.split(","):
         r = calibrate_and_predict(observed, obs, train, valid, truth, params, method, args.workers,
-                                  horizons, tmp, _settings(args.set), args.model_at_truth)
+                                  horizons, tmp, _settings(args.set), args.model_at_truth, args.choose)
         r["validation_window_motion_mm"] = window_motion_mm(motion, valid)
         r["targets"] = targets(protocol, r)
         out["methods"][method] = r
@@ -314,6 +332,11 @@ def _tell(name: str, label: str, r: dict) -> None:
     peers = ", ".join(f"{m} {s['dsc_mean']:.4f}/{s['centroid_mean_mm']:.3f}"
                       for m, s in r["baselines_validation"].items() if s.get("frames"))
     print(f"    peers (DSC/centroid mm): {peers}; {r['verdict']}", file=sys.stderr, flush=True)
+    c = r.get("choice")
+    if c:
+        print(f"    choice: {c['sentence']}; on validation {c['chosen']} {c['validation'].get('centroid_mean_mm', float('nan')):.3f} mm, "
+              f"best {c['validation_best']} (excess {c.get('excess_over_best_mm', float('nan')):+.3f} ± "
+              f"{c.get('excess_spread_mm', float('nan')):.3f} mm)", file=sys.stderr, flush=True)
 
 
 def search_comparison(reduced: dict, implicit: dict) -> dict:
@@ -359,6 +382,9 @@ def main() -> None:
     ap.add_argument("--model-at-truth", action="store_true",
                     help="also run the fitted model at the twin's true parameters (its own error, apart from the "
                     "estimation's: model_at_truth)")
+    ap.add_argument("--choose", action="store_true",
+                    help="also rank the physics and the surrogates on the last quarter of the training frames (the "
+                    "physics calibrated again on the earlier ones) and score the winner: the product's choice")
     ap.add_argument("--no-bar-cap", action="store_true", help="do not continue the sweep's top under the bar")
     ap.add_argument("--compare-search", action="store_true",
                     help="also calibrate with the other search model (reduced/implicit) and compare (issue 39)")

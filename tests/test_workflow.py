@@ -156,6 +156,7 @@ search_particles = 200
 max_evaluations = 1
 horizons_frames = []
 workers = 1
+choose_predictor = true
 [truth]
 masks = "{folder / 'truth' / 'frames'}"
 ''')
@@ -179,6 +180,12 @@ masks = "{folder / 'truth' / 'frames'}"
     summary = _check_outputs(out, setup["frames"], 4)
     assert summary["truth"] == "expert masks" and summary["validation_dsc_mean"] > 0.85
     # two resolutions: the report says which one predicts, as parameters.json does
+    # the predictor the training frames support, chosen on their last quarter and told
+    choice = json.loads((out / "prediction" / "choice.json").read_text())
+    assert choice["winner"] in {"physics", "no_motion", "kalman", "drive_static", "drive_lagged"}
+    assert set(choice["centroid_mm"]) == {"physics", "no_motion", "kalman", "drive_static", "drive_lagged"}
+    assert min(choice["held_frames"]) > choice["fit_frames"][-1]          # held out at the end, in time
+    assert "the training frames' choice:" in (proc.stdout + proc.stderr).replace("\n", " ")
     kept = json.loads((out / "calibration" / "parameters.json").read_text())["fit"]["space_mapping"]["model_kept"]
     assert f"model kept (training cost, mm)</td><td>{kept} (search" in (out / "report" / "report.html").read_text()
     why = _check_in_browser(out / "report" / "report.html")

@@ -64,6 +64,8 @@ def demo(
                   f"Kalman {v['kalman_validation_dsc_mean']:.4f}; the physics is {_verdict(v)}", highlight=False)
     if v.get("verdict"):
         console.print(f"of every predictor: {v['verdict']}", highlight=False)
+    if v.get("choice"):
+        console.print(f"the training frames' choice: {v['choice']}", highlight=False)
     console.print(f"open {root / 'report' / 'report.html'} — the report; prediction/tissue.pvd in ParaView; "
                   f"calibration/observation/tissue_volume.nii.gz in 3D Slicer; all in {root}", highlight=False)
 
@@ -103,6 +105,8 @@ def run(
                   highlight=False)
     if v.get("verdict"):
         console.print(f"of every predictor: {v['verdict']}", highlight=False)
+    if v.get("choice"):
+        console.print(f"the training frames' choice: {v['choice']}", highlight=False)
     console.print(f"open {target.resolve() / 'report' / 'report.html'}; all results in {target.resolve()}",
                   highlight=False)
 

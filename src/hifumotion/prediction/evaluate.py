@@ -108,7 +108,8 @@ def verdict(rank: list[dict]) -> str:
 
 
 def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, truth: dict, training, validation,
-             frame_interval_s: float, horizons=(), online_from=(), program: np.ndarray | None = None) -> Evaluation:
+             frame_interval_s: float, horizons=(), online_from=(), program: np.ndarray | None = None,
+             choice=None) -> Evaluation:
     """Score ``pred`` (:class:`~hifumotion.prediction.physics.Prediction`) and the baselines.
 
     Parameters
@@ -130,6 +131,10 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
         ``(T,)`` the push's known program at every frame
         (:meth:`~hifumotion.observed.setup.PushSchedule.program`): with it the surrogates
         are scored beside the physics.
+    choice
+        A :class:`~hifumotion.prediction.choice.HoldoutRanking` made on the training frames:
+        its winner's validation scores are recorded as the product's choice (``physics["choice"]``),
+        beside how far it falls behind the validation's best predictor.
     """
     from hifumotion.prediction.baselines import hold_last, kalman_predict, ncc_track
     from hifumotion.prediction.pipeline import online_predictions
@@ -156,6 +161,10 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     physics["margin_over"] = {name: margin_over(pred.masks, m, truth, pixel, validation) for name, m in masks.items()}
     physics["ranking"] = ranking(physics["validation"], baselines)
     physics["verdict"] = verdict(physics["ranking"])
+    if choice is not None:
+        every = {"physics": pred.masks, **masks}
+        physics["choice"] = {**choice.as_dict(), **_choice_on_validation(every, choice.winner, physics["ranking"],
+                                                                       truth, pixel, validation)}
 
     online: dict = {}
     physics_online: dict = {}
@@ -183,6 +192,21 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
                                              truth, pixel, targets)
             online[str(h)] = entry
     return Evaluation(table, physics, baselines, online, masks, physics_online)
+
+
+def _choice_on_validation(masks: dict, chosen: str, rank: list[dict], truth: dict, pixel_mm: float, frames) -> dict:
+    """The chosen predictor on the validation frames beside the best one there: its summary, and
+    its excess centroid error over the best's (mean and spread over the frames, mm)."""
+    from hifumotion.metrics import centroid_distance
+
+    best = rank[0]["method"] if rank else chosen
+    frames = [f for f in frames if f in truth and all(f in masks[m] and masks[m][f].any() for m in (chosen, best))]
+    out = {"chosen": chosen, "validation": summary(masks[chosen], truth, pixel_mm, frames), "validation_best": best}
+    if len(frames) >= 2:
+        excess = np.array([centroid_distance(masks[chosen][f], truth[f], pixel_mm)
+                           - centroid_distance(masks[best][f], truth[f], pixel_mm) for f in frames])
+        out.update(excess_over_best_mm=float(excess.mean()), excess_spread_mm=float(excess.std(ddof=1)))
+    return out
 
 
 def _online_surrogate(tracked: np.ndarray, program: np.ndarray, frame_interval_s: float, pixel_mm: float, horizons,

@@ -188,6 +188,12 @@ def _baseline_parts(outcome, folder: Path) -> list[str]:
                    rows, f"Validation frames {outcome.validation}: best mean DSC — {best}")]
     if ev.physics.get("verdict"):
         parts.append(paragraph(f"Of every predictor, by the validation centroid error: {ev.physics['verdict']}."))
+    choice = ev.physics.get("choice")
+    if choice:
+        parts.append(paragraph(f"Chosen before the validation frames, on a hold-out of the training frames: "
+                               f"{choice['sentence']}. On the validation frames the choice ({choice['chosen'].replace('_', ' ')}) "
+                               f"scores DSC {fmt(choice['validation'].get('dsc_mean'), 4)}, centroid "
+                               f"{fmt(choice['validation'].get('centroid_mean_mm'), 3)} mm."))
     parts.append(paragraph("No motion holds the last training contour; the Kalman filter runs on the contour's "
                            "centroid and radial shape; the drive surrogates regress the tracked centroid on the "
                            "push's known program (setup.json), static and with a first-order lag, and move the "

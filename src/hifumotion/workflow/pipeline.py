@@ -14,8 +14,10 @@ and ``hifumotion run CONFIG.toml`` (on a user's files) share:
 4. **online loop** (:func:`~hifumotion.prediction.online.online_loop`): the cine frame by
    frame, each tracked frame assimilated by the reduced model, t + k predicted →
    ``prediction/online_loop.csv`` (each frame's latency), ``online_loop.json``;
-5. **score** the physics and the baselines (no motion, Kalman, NCC online) against the
-   truth — a twin's, or the user's expert masks; without either, against the tracked
+5. **choose** (``choose_predictor``): the physics and the predictors that know the same
+   inputs ranked on the last quarter of the training frames → ``prediction/choice.json``;
+6. **score** the physics and the baselines (no motion, Kalman, the drive surrogates, NCC
+   online) against the truth — a twin's, or the user's expert masks; without either, against the tracked
    contours, and the report says so → ``scores/`` (Table 4 CSV/JSON, overlays).
 
 Each step's output folder is written inside ``out``, which the caller created with
@@ -54,6 +56,7 @@ class EstimationConfig(CalibrationSettings):
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
+    choose_predictor: bool = Field(False, description="rank the physics and the predictors that know the same inputs (the drive surrogates, the Kalman filter, holding still) on the last quarter of the training frames, the physics calibrated again on the earlier ones (one more calibration), and record which the data support (prediction/choice.json, the scores, the report)")
 
 
 @dataclass
@@ -166,6 +169,18 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
                                 validation, predict_s)
         tell("predict", 1.0)
 
+    program = observed.setup.program_at_frames(n)
+    choice = None
+    if s.choose_predictor:
+        with stage("choose the predictor"):
+            from hifumotion.prediction.choice import holdout_physics, rank_on_holdout
+
+            held = holdout_physics(observation, s.model_copy(update={"training_frames": training}), training,
+                                   log_path=out / "calibration" / "holdout_search_log.jsonl", progress=tell)
+            choice = rank_on_holdout({f: observation.frame_masks[f] for f in range(n)}, training, program,
+                                     observed.frame_interval_s, float(observed.pixel_mm), held)
+            write_json(folder / "choice.json", choice.as_dict())
+
     live = None
     if s.online_loop and s.horizons_frames and observation.motion is not None:
         with stage("online loop"):
@@ -183,7 +198,7 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
             truth_kind = "tracked contours"
         ev = evaluate(pred, cal.spec, reference, observation.frame_masks, observed.frames, truth_masks,
                       training, validation, observed.frame_interval_s, s.horizons_frames, now,
-                      program=observed.setup.program_at_frames(n))
+                      program=program, choice=choice)
         if ev.online_masks:
             write_text(folder / "online.csv", online_csv(ev.online_masks, observation.frame_masks, pred.pixel_mm,
                                                          observed.frame_interval_s))
@@ -210,6 +225,7 @@ def outcome_summary(o: PipelineOutcome) -> dict:
            "kalman_validation_dsc_mean": o.evaluation.baselines["kalman"].get("dsc_mean"),
            "physics_vs_no_motion": margin.get("verdict"),
            "verdict": o.evaluation.physics.get("verdict"),
+           "choice": (o.evaluation.physics.get("choice") or {}).get("sentence"),
            "ranking": [r["method"] for r in o.evaluation.physics.get("ranking", [])],
            "dsc_margin_over_no_motion": margin.get("dsc_margin_mean"),
            "dsc_margin_spread": margin.get("dsc_margin_std"),

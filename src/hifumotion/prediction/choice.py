@@ -1,0 +1,166 @@
+"""Which predictor the data support: a temporal hold-out over the training frames.
+
+The validation frames are the future: nothing may be chosen on them. The training frames are
+split in time — every predictor is fitted on the earlier ones and scored on the last quarter
+(at least two frames), by the centroid error against the tracked sections, the frames the
+operator has. The predictors are the physics (calibrated on the earlier frames only, by the
+caller), the drive surrogates (:mod:`~hifumotion.prediction.surrogates`), the
+constant-velocity Kalman filter and holding still — each predicting from the same last seen
+frame, as they will for the validation frames.
+
+The winner is the one with the smallest held-out centroid error; a predictor whose error lies
+within the spread of the winner's margin over it (the standard deviation over the held-out
+frames of the frame-by-frame difference) is "as good" — the data do not tell them apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hifumotion.errors import InputError
+
+#: the share of the training frames held out at their end
+HELD_OUT_SHARE = 0.25
+
+
+def holdout_split(training) -> tuple[list[int], list[int]]:
+    """``(fit, held)``: the training frames before the last quarter, and the last quarter (≥ 2)."""
+    frames = sorted(int(f) for f in training)
+    if len(frames) < 4:
+        raise InputError(f"a hold-out needs at least 4 training frames, got {len(frames)}", "training_frames")
+    held = max(2, int(round(HELD_OUT_SHARE * len(frames))))
+    return frames[:-held], frames[-held:]
+
+
+@dataclass
+class HoldoutRanking:
+    """The predictors on the held-out training frames.
+
+    Attributes
+    ----------
+    fit_frames, held_frames
+        The frames each predictor was fitted on and scored on.
+    centroid_mm
+        method → the mean centroid error on the held-out frames (mm, against the tracked sections).
+    dsc
+        method → the mean DSC there.
+    margin_spread_mm
+        method → the spread (standard deviation over the frames) of the winner's frame-by-frame
+        margin over it (mm); 0 for the winner.
+    """
+
+    fit_frames: list[int]
+    held_frames: list[int]
+    centroid_mm: dict
+    dsc: dict
+    margin_spread_mm: dict
+
+    @property
+    def order(self) -> list[str]:
+        return sorted(self.centroid_mm, key=lambda m: self.centroid_mm[m])
+
+    @property
+    def winner(self) -> str:
+        return self.order[0]
+
+    def as_good(self, method: str) -> bool:
+        """Whether ``method`` is within the spread of the winner's margin over it."""
+        return self.centroid_mm[method] - self.centroid_mm[self.winner] <= self.margin_spread_mm[method]
+
+    def sentence(self) -> str:
+        """What the operator reads: which predictor the training frames favour, against which."""
+        best = self.winner
+        others = [m for m in self.order if m != best]
+        if not others:
+            return f"only {_label(best)} could be scored on the held-out training frames"
+        rival = "physics" if best != "physics" and "physics" in others else others[0]
+        e_best, e_rival = self.centroid_mm[best], self.centroid_mm[rival]
+        span = f"held-out training frames {self.held_frames[0]}–{self.held_frames[-1]}"
+        if self.as_good(rival):
+            return (f"{_label(best)} and {_label(rival)} are as good on the {span} ({e_best:.3f} and {e_rival:.3f} mm, "
+                    f"within the margin's spread {self.margin_spread_mm[rival]:.3f} mm): predicting with {_label(best)}")
+        ratio = e_rival / e_best if e_best > 0 else float("inf")
+        return f"{_label(best)} predicts {ratio:.1f}× better than {_label(rival)} on the {span} ({e_best:.3f} against {e_rival:.3f} mm)"
+
+    def as_dict(self) -> dict:
+        return {"fit_frames": [self.fit_frames[0], self.fit_frames[-1]], "held_frames": self.held_frames,
+                "centroid_mm": self.centroid_mm, "dsc": self.dsc, "margin_spread_mm": self.margin_spread_mm,
+                "order": self.order, "winner": self.winner, "sentence": self.sentence()}
+
+
+def _label(method: str) -> str:
+    return {"physics": "the physics", "no_motion": "holding still", "kalman": "the Kalman filter",
+            "drive_static": "a regression on the drive", "drive_lagged": "a lagged regression on the drive"
+            }.get(method, method.replace("_", " "))
+
+
+def peer_masks(tracked: dict, fit_frames, frames, program: np.ndarray | None, frame_interval_s: float,
+               pixel_mm: float) -> dict[str, dict[int, np.ndarray]]:
+    """The peers' masks at ``frames`` from the tracked masks of ``fit_frames`` (and frame 0):
+    holding still, the Kalman filter and, with the program, the drive surrogates."""
+    from hifumotion.prediction.baselines import hold_last, kalman_predict
+    from hifumotion.prediction.surrogates import drive_regression_predict
+
+    seen = {f: tracked[f] for f in sorted({0, *fit_frames}) if f in tracked}
+    out = {"no_motion": hold_last(seen, frames), "kalman": kalman_predict(seen, frames, frame_interval_s, pixel_mm)}
+    if program is not None:
+        for lagged in (False, True):
+            masks, fit = drive_regression_predict(seen, frames, program, frame_interval_s, pixel_mm, lagged)
+            out[fit.name] = masks
+    return out
+
+
+def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_interval_s: float, pixel_mm: float,
+                    physics: dict | None = None) -> HoldoutRanking:
+    """Rank the predictors on the last quarter of the training frames (module docstring).
+
+    Parameters
+    ----------
+    tracked
+        Frame → the tracked (or given) section's mask: what the predictors see and are scored against.
+    training
+        The training frames; :func:`holdout_split` splits them.
+    program
+        ``(T,)`` the push's known program at every frame, or None (no surrogates).
+    physics
+        Frame → the physics' masks at the held-out frames, from a calibration on the earlier
+        frames only (None: the physics is not ranked).
+    """
+    from hifumotion.metrics import centroid_distance, dice
+
+    fit, held = holdout_split(training)
+    held = [f for f in held if f in tracked and np.asarray(tracked[f]).any()]
+    if len(held) < 2:
+        raise InputError("fewer than two held-out training frames have a tracked section", "training_frames")
+    masks = peer_masks(tracked, fit, held, program, frame_interval_s, pixel_mm)
+    if physics is not None:
+        masks = {"physics": physics, **masks}
+    errors, dsc = {}, {}
+    for name, m in masks.items():
+        e = [centroid_distance(m[f], tracked[f], pixel_mm) if m[f].any() else np.inf for f in held]
+        errors[name] = np.array(e, float)
+        dsc[name] = float(np.mean([dice(m[f], tracked[f]) for f in held]))
+    winner = min(errors, key=lambda n: float(np.mean(errors[n])))
+    spread = {n: 0.0 if n == winner else float(np.std(e - errors[winner], ddof=1)) for n, e in errors.items()}
+    return HoldoutRanking(list(fit), held, {n: float(np.mean(e)) for n, e in errors.items()}, dsc, spread)
+
+
+def holdout_physics(observation, settings, training, log_path=None, progress=None) -> dict[int, np.ndarray]:
+    """The physics' masks on the held-out training frames, calibrated on the earlier ones only.
+
+    ``observation`` (:class:`~hifumotion.estimation.prepare.Observation`) and ``settings``
+    (:class:`~hifumotion.estimation.settings.CalibrationSettings`) are the main calibration's;
+    only the training frames change. Costs one more calibration."""
+    from hifumotion.estimation.calibrate import calibrate
+    from hifumotion.prediction.pipeline import predict_calibrated
+
+    fit, held = holdout_split(training)
+    cal = calibrate(observation, settings.model_copy(update={"training_frames": fit}), log_path=log_path,
+                    progress=progress)
+    pred = predict_calibrated(cal.spec, cal.parameters, observation.reference_shape(), held)
+    return {f: pred.masks[f] for f in held if f in pred.masks}
+
+
+__all__ = ["HELD_OUT_SHARE", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks", "rank_on_holdout"]

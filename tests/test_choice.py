@@ -1,0 +1,77 @@
+"""The product's choice of predictor on a temporal hold-out of the training frames.
+
+Truths: a disc that moves exactly with the drive (a regression on the drive must win, and the
+held-out frames must be the last ones), a disc that stands still (holding still is as good as
+anything), and a perfect physics (the physics must win)."""
+
+import numpy as np
+import pytest
+
+from hifumotion.errors import InputError
+from hifumotion.prediction.choice import holdout_split, rank_on_holdout
+from hifumotion.prediction.evaluate import evaluate
+
+DT, PIXEL = 0.05, 0.1
+
+
+def disc(centre_xy_px, radius_px=14, shape=(80, 200)):
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    return (xx - centre_xy_px[0]) ** 2 + (yy - centre_xy_px[1]) ** 2 <= radius_px ** 2
+
+
+def sliding(n=200):
+    t = np.arange(n) * DT
+    travel = np.interp(t, [0.0, 3.0, 6.0, 10.0], [0.0, 1.0, 5.0, 5.0])    # a drive that speeds up, then stops
+    x_px = 40 + 1.0 * travel / PIXEL                                        # 1 mm of motion per mm of travel
+    return travel, {f: disc((x_px[f], 40)) for f in range(n)}, x_px
+
+
+def test_the_held_out_frames_are_the_last_quarter():
+    fit, held = holdout_split(range(20, 101, 10))
+    assert held == [90, 100] and fit == [20, 30, 40, 50, 60, 70, 80]
+    with pytest.raises(InputError, match="training_frames"):
+        holdout_split([20, 30, 40])
+
+
+def test_a_target_that_moves_with_the_drive_is_given_to_the_regression():
+    travel, tracked, _ = sliding()
+    r = rank_on_holdout(tracked, range(20, 101, 5), travel, DT, PIXEL)
+    assert r.winner in ("drive_static", "drive_lagged")
+    # the drive speeds up inside the held-out frames: holding still and constant velocity miss it
+    assert r.centroid_mm["no_motion"] > 5 * r.centroid_mm[r.winner]
+    assert r.centroid_mm["kalman"] > 2 * r.centroid_mm[r.winner]
+    assert "regression on the drive" in r.sentence()
+
+
+def test_a_perfect_physics_wins_and_a_still_target_makes_no_winner_of_anything():
+    travel, tracked, _ = sliding()
+    training = list(range(20, 101, 5))
+    _, held = holdout_split(training)
+    r = rank_on_holdout(tracked, training, travel, DT, PIXEL, physics={f: tracked[f] for f in held})
+    assert r.winner == "physics" and r.centroid_mm["physics"] == 0.0
+    still = {f: disc((60, 40)) for f in range(200)}
+    r = rank_on_holdout(still, training, travel, DT, PIXEL)
+    assert r.centroid_mm["no_motion"] == 0.0
+    assert all(r.as_good(m) for m in r.centroid_mm if r.centroid_mm[m] < 0.05)
+
+
+def test_evaluate_scores_the_choice_beside_the_best_on_the_validation_frames():
+    from types import SimpleNamespace
+
+    travel, tracked, x_px = sliding()
+    training, validation = list(range(20, 101, 5)), list(range(110, 191, 10))
+    # a physics that lags 0.5 mm behind the truth: the regression on the drive is better
+    pred = SimpleNamespace(pixel_mm=PIXEL, masks={f: disc((x_px[f] - 5, 40)) for f in training + validation})
+    _, held = holdout_split(training)
+    choice = rank_on_holdout(tracked, training, travel, DT, PIXEL, physics={f: pred.masks[f] for f in held})
+    stack = np.stack([tracked[f] for f in range(200)])
+    ev = evaluate(pred, None, None, stack, stack.astype(float), tracked, training, validation, DT,
+                  program=travel, choice=choice)
+    c = ev.physics["choice"]
+    assert c["chosen"] in ("drive_static", "drive_lagged")
+    assert c["validation"]["centroid_mean_mm"] < 0.1 < ev.physics["validation"]["centroid_mean_mm"]
+    # the two regressions are one here (the target moves with the drive, without lag): whichever
+    # was chosen is within a tenth of a pixel of the other
+    assert c["excess_over_best_mm"] <= 0.1 * PIXEL
+    assert ev.physics["ranking"][0]["method"] in ("drive_static", "drive_lagged")
+    assert "better than" in ev.physics["verdict"]
