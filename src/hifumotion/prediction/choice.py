@@ -6,7 +6,8 @@ split in time — every predictor is fitted on the earlier ones and scored on th
 operator has. The predictors are the physics (calibrated on the earlier frames only, by the
 caller), the drive surrogates (:mod:`~hifumotion.prediction.surrogates`), the
 constant-velocity Kalman filter and holding still — each predicting from the same last seen
-frame, as they will for the validation frames.
+frame, as they will for the validation frames — and the physics corrected by a regression of
+its miss on the drive (:func:`~hifumotion.prediction.surrogates.residual_corrected`).
 
 The winner is the one with the smallest held-out centroid error; a predictor whose error lies
 within the spread of the winner's margin over it (the standard deviation over the held-out
@@ -92,7 +93,8 @@ class HoldoutRanking:
 
 def _label(method: str) -> str:
     return {"physics": "the physics", "no_motion": "holding still", "kalman": "the Kalman filter",
-            "drive_static": "a regression on the drive", "drive_lagged": "a lagged regression on the drive"
+            "drive_static": "a regression on the drive", "drive_lagged": "a lagged regression on the drive",
+            "physics_corrected": "the physics corrected by a regression of its miss on the drive"
             }.get(method, method.replace("_", " "))
 
 
@@ -125,8 +127,9 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
     program
         ``(T,)`` the push's known program at every frame, or None (no surrogates).
     physics
-        Frame → the physics' masks at the held-out frames, from a calibration on the earlier
-        frames only (None: the physics is not ranked).
+        Frame → the physics' masks at the held-out frames (and, for its drive-corrected form,
+        at the earlier ones), from a calibration on the earlier frames only (None: the physics
+        is not ranked).
     """
     from hifumotion.metrics import centroid_distance, dice
 
@@ -137,6 +140,12 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
     masks = peer_masks(tracked, fit, held, program, frame_interval_s, pixel_mm)
     if physics is not None:
         masks = {"physics": physics, **masks}
+        if program is not None and sum(f in physics for f in fit) >= 2:
+            from hifumotion.prediction.surrogates import residual_corrected
+
+            seen = {f: tracked[f] for f in sorted({0, *fit}) if f in tracked}
+            masks["physics_corrected"] = residual_corrected(physics, seen, fit, held, program, frame_interval_s,
+                                                            pixel_mm)[0]
     errors, dsc = {}, {}
     for name, m in masks.items():
         e = [centroid_distance(m[f], tracked[f], pixel_mm) if m[f].any() else np.inf for f in held]
@@ -148,7 +157,8 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
 
 
 def holdout_physics(observation, settings, training, log_path=None, progress=None) -> dict[int, np.ndarray]:
-    """The physics' masks on the held-out training frames, calibrated on the earlier ones only.
+    """The physics' masks on the training frames, calibrated on the earlier ones only (the
+    held-out ones its prediction).
 
     ``observation`` (:class:`~hifumotion.estimation.prepare.Observation`) and ``settings``
     (:class:`~hifumotion.estimation.settings.CalibrationSettings`) are the main calibration's;
@@ -159,8 +169,8 @@ def holdout_physics(observation, settings, training, log_path=None, progress=Non
     fit, held = holdout_split(training)
     cal = calibrate(observation, settings.model_copy(update={"training_frames": fit}), log_path=log_path,
                     progress=progress)
-    pred = predict_calibrated(cal.spec, cal.parameters, observation.reference_shape(), held)
-    return {f: pred.masks[f] for f in held if f in pred.masks}
+    pred = predict_calibrated(cal.spec, cal.parameters, observation.reference_shape(), fit + held)
+    return {f: pred.masks[f] for f in fit + held if f in pred.masks}
 
 
 __all__ = ["HELD_OUT_SHARE", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks", "rank_on_holdout"]

@@ -138,7 +138,7 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     """
     from hifumotion.prediction.baselines import hold_last, kalman_predict, ncc_track
     from hifumotion.prediction.pipeline import online_predictions
-    from hifumotion.prediction.surrogates import drive_regression_predict
+    from hifumotion.prediction.surrogates import drive_regression_predict, residual_corrected
 
     pixel = float(pred.pixel_mm)
     training, validation = [int(f) for f in training], [int(f) for f in validation]
@@ -154,6 +154,9 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
         for lagged in (False, True):
             m, fit = drive_regression_predict(seen, validation, program, frame_interval_s, pixel, lagged)
             masks[fit.name], fits[fit.name] = m, fit.as_dict()
+        # the physics with its miss on the training frames regressed on the program and taken out
+        m, fit = residual_corrected(pred.masks, seen, training, validation, program, frame_interval_s, pixel)
+        masks["physics_corrected"], fits["physics_corrected"] = m, fit.as_dict()
     baselines = {name: summary(m, truth, pixel, validation) for name, m in masks.items()}
     for name, fit in fits.items():
         baselines[name]["fit"] = fit

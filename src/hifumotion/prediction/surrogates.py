@@ -206,6 +206,24 @@ def drive_regression_predict(observed: dict[int, np.ndarray], frames, program: n
     return {int(f): shift_mask(base, path[int(f)] - path[last], pixel_mm) for f in frames}, fit
 
 
+def residual_corrected(model_masks: dict[int, np.ndarray], tracked: dict[int, np.ndarray], fit_frames, frames,
+                       program: np.ndarray, frame_interval_s: float, pixel_mm: float
+                       ) -> tuple[dict[int, np.ndarray], DriveRegression]:
+    """A model's masks corrected by a regression of its miss on the program: the tracked minus
+    the model's centroid on ``fit_frames`` fitted by the lagged regression, and each of the
+    model's masks at ``frames`` moved by the fitted miss there (the physics' systematic error
+    that follows the drive, and its offset, taken out). Returns ``(masks, fit)``."""
+    both = [f for f in fit_frames if f in model_masks and f in tracked
+            and np.asarray(model_masks[f]).any() and np.asarray(tracked[f]).any()]
+    if len(both) < 2:
+        raise InputError("fewer than two frames with both the model's and the tracked section", "fit_frames")
+    _, model_c = mask_centroids_mm({f: model_masks[f] for f in both}, pixel_mm)
+    _, seen_c = mask_centroids_mm({f: tracked[f] for f in both}, pixel_mm)
+    fit = fit_drive_regression(seen_c - model_c, both, program, frame_interval_s, lagged=True)
+    miss = fit.centroids_mm(program, frame_interval_s)
+    return {int(f): shift_mask(model_masks[f], miss[int(f)], pixel_mm) for f in frames}, fit
+
+
 class _Member:
     """One recursive least-squares regression with forgetting (information form)."""
 
@@ -319,4 +337,5 @@ def online_drive_regression(centroids_mm: np.ndarray, program: np.ndarray, frame
 
 
 __all__ = ["DriveRegression", "OnlineDriveRegression", "drive_regression_predict", "fit_drive_regression",
+           "residual_corrected",
            "lag_grid_s", "lagged_program", "mask_centroids_mm", "online_drive_regression", "shift_mask"]
