@@ -333,7 +333,7 @@ def _tell(name: str, label: str, r: dict) -> None:
                       for m, s in r["baselines_validation"].items() if s.get("frames"))
     print(f"    peers (DSC/centroid mm): {peers}; {r['verdict']}", file=sys.stderr, flush=True)
     c = r.get("choice")
-    if c:
+    if c and "chosen" in c:
         print(f"    choice: {c['sentence']}; on validation {c['chosen']} {c['validation'].get('centroid_mean_mm', float('nan')):.3f} mm, "
               f"best {c['validation_best']} (excess {c.get('excess_over_best_mm', float('nan')):+.3f} ± "
               f"{c.get('excess_spread_mm', float('nan')):.3f} mm)", file=sys.stderr, flush=True)

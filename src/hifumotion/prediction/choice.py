@@ -1,13 +1,14 @@
 """Which predictor the data support: a temporal hold-out over the training frames.
 
 The validation frames are the future: nothing may be chosen on them. The training frames are
-split in time — every predictor is fitted on the earlier ones and scored on the last quarter
-(at least two frames), by the centroid error against the tracked sections, the frames the
-operator has. The predictors are the physics (calibrated on the earlier frames only, by the
+split in time — every predictor is fitted on the earlier ones and scored on every frame of the
+last quarter's span (at least two training frames held out), by the centroid error against
+the tracked sections, the frames the operator has. The predictors are the physics (calibrated on the earlier frames only, by the
 caller), the drive surrogates (:mod:`~hifumotion.prediction.surrogates`), the
 constant-velocity Kalman filter and holding still — each predicting from the same last seen
-frame, as they will for the validation frames — and the physics corrected by a regression of
-its miss on the drive (:func:`~hifumotion.prediction.surrogates.residual_corrected`).
+frame, as they will for the validation frames — the physics' motion from that frame
+(:func:`~hifumotion.prediction.surrogates.anchored_to_last`) and the physics corrected by a
+regression of its miss on the drive (:func:`~hifumotion.prediction.surrogates.residual_corrected`).
 
 The winner is the one with the smallest held-out centroid error; a predictor whose error lies
 within the spread of the winner's margin over it (the standard deviation over the held-out
@@ -27,12 +28,14 @@ HELD_OUT_SHARE = 0.25
 
 
 def holdout_split(training) -> tuple[list[int], list[int]]:
-    """``(fit, held)``: the training frames before the last quarter, and the last quarter (≥ 2)."""
+    """``(fit, held)``: the training frames before their last quarter (≥ 2 held out), and every
+    frame after the last of those up to the last training frame — the frames between the
+    training frames are observed too, and each adds a held-out sample."""
     frames = sorted(int(f) for f in training)
     if len(frames) < 4:
         raise InputError(f"a hold-out needs at least 4 training frames, got {len(frames)}", "training_frames")
-    held = max(2, int(round(HELD_OUT_SHARE * len(frames))))
-    return frames[:-held], frames[-held:]
+    fit = frames[:-max(2, int(round(HELD_OUT_SHARE * len(frames))))]
+    return fit, list(range(fit[-1] + 1, frames[-1] + 1))
 
 
 @dataclass
@@ -94,7 +97,8 @@ class HoldoutRanking:
 def _label(method: str) -> str:
     return {"physics": "the physics", "no_motion": "holding still", "kalman": "the Kalman filter",
             "drive_static": "a regression on the drive", "drive_lagged": "a lagged regression on the drive",
-            "physics_corrected": "the physics corrected by a regression of its miss on the drive"
+            "physics_corrected": "the physics corrected by a regression of its miss on the drive",
+            "physics_anchored": "the physics' motion from the last seen section"
             }.get(method, method.replace("_", " "))
 
 
@@ -138,12 +142,16 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
     if len(held) < 2:
         raise InputError("fewer than two held-out training frames have a tracked section", "training_frames")
     masks = peer_masks(tracked, fit, held, program, frame_interval_s, pixel_mm)
+    if physics is not None and any(f not in physics for f in held):
+        raise InputError(f"the physics' masks must cover the held-out frames {held[0]}–{held[-1]}", "physics")
     if physics is not None:
-        masks = {"physics": physics, **masks}
-        if program is not None and sum(f in physics for f in fit) >= 2:
-            from hifumotion.prediction.surrogates import residual_corrected
+        from hifumotion.prediction.surrogates import anchored_to_last, residual_corrected
 
-            seen = {f: tracked[f] for f in sorted({0, *fit}) if f in tracked}
+        seen = {f: tracked[f] for f in sorted({0, *fit}) if f in tracked}
+        masks = {"physics": physics, **masks}
+        if max(seen) in physics:
+            masks["physics_anchored"] = anchored_to_last(physics, seen, held, pixel_mm)
+        if program is not None and sum(f in physics for f in fit) >= 2:
             masks["physics_corrected"] = residual_corrected(physics, seen, fit, held, program, frame_interval_s,
                                                             pixel_mm)[0]
     errors, dsc = {}, {}

@@ -138,7 +138,7 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     """
     from hifumotion.prediction.baselines import hold_last, kalman_predict, ncc_track
     from hifumotion.prediction.pipeline import online_predictions
-    from hifumotion.prediction.surrogates import drive_regression_predict, residual_corrected
+    from hifumotion.prediction.surrogates import anchored_to_last, drive_regression_predict, residual_corrected
 
     pixel = float(pred.pixel_mm)
     training, validation = [int(f) for f in training], [int(f) for f in validation]
@@ -154,6 +154,7 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
         for lagged in (False, True):
             m, fit = drive_regression_predict(seen, validation, program, frame_interval_s, pixel, lagged)
             masks[fit.name], fits[fit.name] = m, fit.as_dict()
+        masks["physics_anchored"] = anchored_to_last(pred.masks, seen, validation, pixel)
         # the physics with its miss on the training frames regressed on the program and taken out
         m, fit = residual_corrected(pred.masks, seen, training, validation, program, frame_interval_s, pixel)
         masks["physics_corrected"], fits["physics_corrected"] = m, fit.as_dict()
@@ -166,8 +167,10 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     physics["verdict"] = verdict(physics["ranking"])
     if choice is not None:
         every = {"physics": pred.masks, **masks}
-        physics["choice"] = {**choice.as_dict(), **_choice_on_validation(every, choice.winner, physics["ranking"],
-                                                                       truth, pixel, validation)}
+        physics["choice"] = choice.as_dict()
+        if choice.winner in every:      # (a winner that needs the program is scored where it is given)
+            physics["choice"].update(_choice_on_validation(every, choice.winner, physics["ranking"], truth, pixel,
+                                                           validation))
 
     online: dict = {}
     physics_online: dict = {}

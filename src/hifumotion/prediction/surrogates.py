@@ -206,6 +206,20 @@ def drive_regression_predict(observed: dict[int, np.ndarray], frames, program: n
     return {int(f): shift_mask(base, path[int(f)] - path[last], pixel_mm) for f in frames}, fit
 
 
+def anchored_to_last(model_masks: dict[int, np.ndarray], seen: dict[int, np.ndarray], frames,
+                     pixel_mm: float) -> dict[int, np.ndarray]:
+    """A model's motion from the last seen frame: the last seen mask moved by the model's
+    centroid motion from that frame to each of ``frames`` — the present from the image, the
+    motion ahead from the model (the surrogates' and the online aim's anchoring)."""
+    last = max(f for f in seen if np.asarray(seen[f]).any())
+    wanted = {int(f) for f in [last, *frames]}
+    found, c = mask_centroids_mm({f: model_masks[f] for f in wanted}, pixel_mm)
+    if len(found) != len(wanted):
+        raise InputError("the model's section is empty at a frame asked for", "model_masks")
+    at = dict(zip(found.tolist(), c))
+    return {int(f): shift_mask(seen[last], at[f] - at[last], pixel_mm) for f in frames}
+
+
 def residual_corrected(model_masks: dict[int, np.ndarray], tracked: dict[int, np.ndarray], fit_frames, frames,
                        program: np.ndarray, frame_interval_s: float, pixel_mm: float
                        ) -> tuple[dict[int, np.ndarray], DriveRegression]:
@@ -337,5 +351,5 @@ def online_drive_regression(centroids_mm: np.ndarray, program: np.ndarray, frame
 
 
 __all__ = ["DriveRegression", "OnlineDriveRegression", "drive_regression_predict", "fit_drive_regression",
-           "residual_corrected",
+           "anchored_to_last", "residual_corrected",
            "lag_grid_s", "lagged_program", "mask_centroids_mm", "online_drive_regression", "shift_mask"]
