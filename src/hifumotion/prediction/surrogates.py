@@ -149,6 +149,7 @@ def fit_drive_regression(centroids_mm: np.ndarray, frames, program: np.ndarray, 
     if ok.sum() < 2:
         raise InputError("fewer than two tracked centroids to fit a surrogate to", "centroids_mm")
     c, f = c[ok], f[ok]
+
     def fitted(lag: float | None) -> DriveRegression:
         phi = _features(u, frame_interval_s, lag)[f]
         theta, *_ = np.linalg.lstsq(phi, c, rcond=None)
@@ -239,19 +240,22 @@ def residual_corrected(model_masks: dict[int, np.ndarray], tracked: dict[int, np
 
 
 class _Member:
-    """One recursive least-squares regression with forgetting (information form)."""
+    """One recursive least-squares regression with forgetting (information form) and a fixed
+    ridge prior: the data's information decays, the prior does not, so a direction the recent
+    frames no longer excite (a drive held still) relaxes towards no motion instead of winding up."""
 
     def __init__(self, lag_s: float | None, forgetting: float, p: int, regularisation: float):
         self.lag_s = lag_s
         self.forgetting = forgetting
-        self.A = regularisation * np.eye(p)
+        self.prior = regularisation * np.eye(p)
+        self.A = np.zeros((p, p))
         self.B = np.zeros((p, 2))
         self.theta = np.zeros((p, 2))
 
     def update(self, phi: np.ndarray, c: np.ndarray) -> None:
         self.A = self.forgetting * self.A + np.outer(phi, phi)
         self.B = self.forgetting * self.B + np.outer(phi, c)
-        self.theta = np.linalg.solve(self.A, self.B)
+        self.theta = np.linalg.solve(self.A + self.prior, self.B)
 
 
 class OnlineDriveRegression:
