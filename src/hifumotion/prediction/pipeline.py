@@ -18,15 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from hifumotion.metrics import centroid
+from hifumotion.prediction.masks import shift_mask
 from hifumotion.prediction.physics import Prediction, predict_frames, predicted_mask
-
-
-def shift_mask(mask: np.ndarray, shift_px: np.ndarray) -> np.ndarray:
-    """``mask`` translated by ``(dx, dy)`` px (bilinear, re-thresholded); what leaves the image is lost."""
-    from scipy import ndimage
-
-    moved = ndimage.shift(mask.astype(float), (float(shift_px[1]), float(shift_px[0])), order=1, mode="constant")
-    return moved >= 0.5
 
 
 def online_predictions(pred: Prediction, spec, reference, observed_masks: np.ndarray, horizons_frames,

@@ -43,7 +43,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, optimize, signal
+from scipy import optimize, signal
 
 from hifumotion.errors import InputError
 
@@ -169,20 +169,12 @@ def fit_drive_regression(centroids_mm: np.ndarray, frames, program: np.ndarray, 
     return refined if refined.residual_rms_mm <= fits[i].residual_rms_mm else fits[i]
 
 
-#: the blur (px) under which a mask is moved: a binary mask's straight edges sit half-way between
-#: pixel centres, so an unblurred shift below ½ px moves nothing; on random lobed sections the
-#: realised shift misses the asked one by 0.086 / 0.066 / 0.045 / 0.054 px at σ = 1 / 1.5 / 2 / 3
-#: (docs/decisions.md, "Predictors that know the same inputs")
-SHIFT_BLUR_PX = 2.0
-
-
 def shift_mask(mask: np.ndarray, shift_mm, pixel_mm: float) -> np.ndarray:
-    """``mask`` translated by ``shift_mm`` (x along columns, y along rows) to a fraction of a
-    pixel: its indicator blurred (σ = :data:`SHIFT_BLUR_PX`), moved by linear interpolation and
-    cut at ½, so the pixels whose centres the smoothed boundary crosses change side."""
-    dx, dy = np.asarray(shift_mm, float) / pixel_mm
-    smooth = ndimage.gaussian_filter(np.asarray(mask, float), SHIFT_BLUR_PX)
-    return ndimage.shift(smooth, (dy, dx), order=1, mode="constant", cval=0.0) > 0.5
+    """``mask`` translated by ``shift_mm`` (x along columns, y along rows, mm) to a fraction of a
+    pixel (:func:`hifumotion.prediction.masks.shift_mask`)."""
+    from hifumotion.prediction.masks import shift_mask as shift_px
+
+    return shift_px(mask, np.asarray(shift_mm, float) / pixel_mm)
 
 
 def mask_centroids_mm(masks: dict, pixel_mm: float) -> tuple[np.ndarray, np.ndarray]:
