@@ -660,6 +660,22 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     assert (pred / "score" / "overlays.png").is_file()      # Fig. 4
     # a floor, not the target: the predicted sections overlap the truth
     assert summary["validation"]["dsc"]["mean"] > 0.7
+    # the peers that know the same inputs beside it, from what the calibration recorded
+    from hifumotion.metrics import dice
+    from hifumotion.scoring import read_frame_masks
+
+    out = subprocess.run(cli + ["score", str(pred), str(folder / "truth"), "--calibration", str(cal),
+                                "-o", str(tmp_path / "score_peers")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "of every predictor:" in " ".join((out.stdout + out.stderr).split())
+    peers = json.loads((tmp_path / "score_peers" / "score.json").read_text())["peers"]
+    assert set(peers["peers"]) == {"no_motion", "kalman", "drive_static", "drive_lagged"}
+    # holding still is the last training frame's tracked mask, scored here independently
+    tracked_last = read_frame_masks(cal / "observation")[max(train)]
+    truth_masks = read_frame_masks(folder / "truth")
+    hold = np.mean([dice(tracked_last, truth_masks[f]) for f in valid])
+    assert peers["peers"]["no_motion"]["dsc_mean"] == pytest.approx(hold, abs=1e-9)
+    assert peers["ranking"][0]["centroid_mean_mm"] == min(r["centroid_mean_mm"] for r in peers["ranking"])
     # existing output is never overwritten without --overwrite
     again = subprocess.run(cli + ["predict", str(cal), "-o", str(pred)], capture_output=True, text=True)
     assert again.returncode == 2 and "overwrite" in (again.stdout + again.stderr)
@@ -672,6 +688,10 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     assert len(rows) == 2 * 39 and set(rows["horizon_frames"]) == {1, 2} and np.all(rows["latency_ms"] > 0)
     report = json.loads((live / "online.json").read_text())
     assert report["frames"] == 39 and set(report["horizons"]) == {"1", "2"}
+    # the online surrogate beside the filter: its aims in the file, its error in the summary and on the console
+    assert np.isfinite(rows["surrogate_x_mm"]).all()
+    assert all(h["surrogate_error_vs_tracked_mean_mm"] >= 0 for h in report["horizons"].values())
+    assert "the drive surrogate" in " ".join((out.stdout + out.stderr).split())
     assert (live / "online.png").is_file() and (live / "run_info.json").is_file()
     bad = subprocess.run(cli + ["online", str(cal), str(folder / "observed"), "-o", str(tmp_path / "x"),
                                 "--horizons", "0"], capture_output=True, text=True)

@@ -19,6 +19,7 @@ def score(
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New folder for score.csv and score.json (default PREDICTION_DIR/score)."),
     spacing: Optional[float] = typer.Option(None, "--spacing", callback=positive, help="Pixel size in mm (default: the truth's parameters.json)."),
     images: Optional[Path] = typer.Option(None, "--images", help="The observed frames (frame_NNNN.png) for the overlays (default: TRUTH_DIR/../observed/frames if present)."),
+    calibration: Optional[Path] = typer.Option(None, "--calibration", help="The calibration folder the prediction came from: its tracked frames, training frames and the push's program (the observed setup.json) put the predictors that know the same inputs beside it (holding still, Kalman, the drive surrogates)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Score predicted contours: DSC, HD95 and centroid error per frame; training and validation summaries."""
@@ -37,13 +38,18 @@ def score(
                                         "pixel_mm": pixel})
     with record.stage("score"):
         table = score_masks(predicted, truth, pixel)
+        peers = None
+        if calibration is not None:
+            validation = [r["frame"] for r in table.rows if r["set"] == "validation"]
+            peers = _peer_scores(calibration, predicted, truth, validation, pixel)
     frames_dir = images if images is not None else truth_dir.parent / "observed" / "frames"
     if images is not None and not images.is_dir():
         raise InputError("no such folder of observed frames", images)
     out_dir = output if output is not None else prediction_dir / "score"
-    with output_folder(out_dir, overwrite, inputs=(prediction_dir, truth_dir, images)) as out:
+    with output_folder(out_dir, overwrite, inputs=(prediction_dir, truth_dir, images, calibration)) as out:
         write_text(out / "score.csv", table.to_csv())
-        write_json(out / "score.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows})
+        write_json(out / "score.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows,
+                                        **({"peers": peers} if peers is not None else {})})
         if frames_dir.is_dir():
             from hifumotion.io.raster import read_raster_array
 
@@ -59,4 +65,39 @@ def score(
                       f"{s['dsc']['min']:.4f}  HD95 mean {s['hd95_mm']['mean']:.2f} mm  centroid error mean "
                       f"{s['centroid_error_mm']['mean']:.2f} mm max {s['centroid_error_mm']['max']:.2f} mm",
                       highlight=False)
+    if peers is not None:
+        for name, p in peers["peers"].items():
+            if p.get("frames"):
+                console.print(f"  {name.replace('_', ' '):14s} validation DSC mean {p['dsc_mean']:.4f}  centroid error "
+                              f"mean {p['centroid_mean_mm']:.2f} mm", highlight=False)
+        console.print(f"of every predictor: {peers['verdict']}", highlight=False)
     console.print(f"scores in {out_dir.resolve()}", highlight=False)
+
+
+def _peer_scores(calibration: Path, predicted: dict, truth: dict, validation: list[int], pixel_mm: float) -> dict:
+    """The peers beside the prediction, from what ``calibration`` recorded (its tracked frames,
+    training frames and frame interval, and the observed ``setup.json``'s program)."""
+    from hifumotion.io.structured import read_structured
+    from hifumotion.observed.setup import read_setup
+    from hifumotion.prediction.evaluate import peer_scores
+    from hifumotion.scoring import read_frame_masks
+
+    params_path = calibration / "parameters.json"
+    if not params_path.is_file():
+        raise InputError("no parameters.json: expected a calibration folder (hifumotion calibrate's output)", calibration)
+    params = read_structured(params_path, "json", "parameters.json")
+    if not isinstance(params, dict) or not params.get("training_frames") or not params.get("frame_interval_s"):
+        raise InputError("expected training_frames and frame_interval_s (a calibration's parameters.json)", params_path)
+    if len(validation) < 2:
+        raise InputError("fewer than two validation frames among the predicted masks", "PREDICTION_DIR")
+    tracked = read_frame_masks(calibration / "observation")
+    program = None
+    if params.get("observed"):
+        setup_path = (calibration / params["observed"]).resolve() / "setup.json"
+        if setup_path.is_file():
+            setup = read_setup(setup_path)
+            program = setup.program_at_frames(max(setup.frames, max(validation) + 1))
+    if program is None:
+        console.print("the observed setup.json was not found: the drive surrogates are left out", highlight=False)
+    return peer_scores(predicted, tracked, truth, params["training_frames"], validation, program,
+                       float(params["frame_interval_s"]), pixel_mm)

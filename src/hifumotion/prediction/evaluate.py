@@ -200,6 +200,23 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     return Evaluation(table, physics, baselines, online, masks, physics_online)
 
 
+def peer_scores(predicted: dict, tracked: dict, truth: dict, training, validation, program: np.ndarray | None,
+                frame_interval_s: float, pixel_mm: float) -> dict:
+    """A prediction on its validation frames beside the peers that know the same inputs
+    (holding still, the Kalman filter and, with the program, the drive surrogates, each from
+    the tracked frame 0 and training frames), their ranking and the verdict — what ``hifumotion
+    score --calibration`` prints."""
+    from hifumotion.prediction.choice import peer_masks
+
+    validation = [int(f) for f in validation]
+    masks = peer_masks(tracked, [int(f) for f in training], validation, program, frame_interval_s, pixel_mm)
+    peers = {name: summary(m, truth, pixel_mm, validation) for name, m in masks.items()}
+    physics = summary(predicted, truth, pixel_mm, validation)
+    rank = ranking(physics, peers)
+    return {"prediction": physics, "peers": peers, "ranking": rank, "verdict": verdict(rank),
+            "margin_over": {name: margin_over(predicted, m, truth, pixel_mm, validation) for name, m in masks.items()}}
+
+
 def _choice_on_validation(masks: dict, chosen: str, rank: list[dict], truth: dict, pixel_mm: float, frames) -> dict:
     """The chosen predictor on the validation frames beside the best one there: its summary, and
     its excess centroid error over the best's (mean and spread over the frames, mm)."""
@@ -244,4 +261,4 @@ def online_schedule(training, validation, horizons, n_frames: int, samples: int 
     return now, keep
 
 
-__all__ = ["Evaluation", "evaluate", "summary", "margin_over", "online_schedule", "ranking", "verdict"]
+__all__ = ["Evaluation", "evaluate", "summary", "margin_over", "online_schedule", "peer_scores", "ranking", "verdict"]
