@@ -103,19 +103,21 @@ def _label(method: str) -> str:
 
 
 def peer_masks(tracked: dict, fit_frames, frames, program: np.ndarray | None, frame_interval_s: float,
-               pixel_mm: float) -> dict[str, dict[int, np.ndarray]]:
+               pixel_mm: float) -> tuple[dict[str, dict[int, np.ndarray]], dict[str, dict]]:
     """The peers' masks at ``frames`` from the tracked masks of ``fit_frames`` (and frame 0):
-    holding still, the Kalman filter and, with the program, the drive surrogates."""
+    holding still, the Kalman filter and, with the program, the drive surrogates. Returns
+    ``(method → frame → mask, surrogate → its fit as a dict)``."""
     from hifumotion.prediction.baselines import hold_last, kalman_predict
     from hifumotion.prediction.surrogates import drive_regression_predict
 
     seen = {f: tracked[f] for f in sorted({0, *fit_frames}) if f in tracked}
     out = {"no_motion": hold_last(seen, frames), "kalman": kalman_predict(seen, frames, frame_interval_s, pixel_mm)}
+    fits = {}
     if program is not None:
         for lagged in (False, True):
             masks, fit = drive_regression_predict(seen, frames, program, frame_interval_s, pixel_mm, lagged)
-            out[fit.name] = masks
-    return out
+            out[fit.name], fits[fit.name] = masks, fit.as_dict()
+    return out, fits
 
 
 def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_interval_s: float, pixel_mm: float,
@@ -141,7 +143,7 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
     held = [f for f in held if f in tracked and np.asarray(tracked[f]).any()]
     if len(held) < 2:
         raise InputError("fewer than two held-out training frames have a tracked section", "training_frames")
-    masks = peer_masks(tracked, fit, held, program, frame_interval_s, pixel_mm)
+    masks = peer_masks(tracked, fit, held, program, frame_interval_s, pixel_mm)[0]
     if physics is not None and any(f not in physics for f in held):
         raise InputError(f"the physics' masks must cover the held-out frames {held[0]}–{held[-1]}", "physics")
     if physics is not None:

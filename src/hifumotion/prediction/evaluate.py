@@ -136,9 +136,10 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
         its winner's validation scores are recorded as the product's choice (``physics["choice"]``),
         beside how far it falls behind the validation's best predictor.
     """
-    from hifumotion.prediction.baselines import hold_last, kalman_predict, ncc_track
+    from hifumotion.prediction.baselines import kalman_predict, ncc_track
+    from hifumotion.prediction.choice import peer_masks
     from hifumotion.prediction.pipeline import online_predictions
-    from hifumotion.prediction.surrogates import anchored_to_last, drive_regression_predict, residual_corrected
+    from hifumotion.prediction.surrogates import anchored_to_last, residual_corrected
 
     pixel = float(pred.pixel_mm)
     training, validation = [int(f) for f in training], [int(f) for f in validation]
@@ -147,13 +148,8 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
     physics = {"training": summary(pred.masks, truth, pixel, training),
                "validation": summary(pred.masks, truth, pixel, validation)}
     seen = {f: tracked[f] for f in [0, *training]}
-    masks = {"no_motion": hold_last(seen, validation),
-             "kalman": kalman_predict(seen, validation, frame_interval_s, pixel)}
-    fits = {}
+    masks, fits = peer_masks(seen, training, validation, program, frame_interval_s, pixel)
     if program is not None:
-        for lagged in (False, True):
-            m, fit = drive_regression_predict(seen, validation, program, frame_interval_s, pixel, lagged)
-            masks[fit.name], fits[fit.name] = m, fit.as_dict()
         masks["physics_anchored"] = anchored_to_last(pred.masks, seen, validation, pixel)
         # the physics with its miss on the training frames regressed on the program and taken out
         m, fit = residual_corrected(pred.masks, seen, training, validation, program, frame_interval_s, pixel)
@@ -209,7 +205,7 @@ def peer_scores(predicted: dict, tracked: dict, truth: dict, training, validatio
     from hifumotion.prediction.choice import peer_masks
 
     validation = [int(f) for f in validation]
-    masks = peer_masks(tracked, [int(f) for f in training], validation, program, frame_interval_s, pixel_mm)
+    masks = peer_masks(tracked, [int(f) for f in training], validation, program, frame_interval_s, pixel_mm)[0]
     peers = {name: summary(m, truth, pixel_mm, validation) for name, m in masks.items()}
     physics = summary(predicted, truth, pixel_mm, validation)
     rank = ranking(physics, peers)
