@@ -185,6 +185,13 @@ masks = "{folder / 'truth' / 'frames'}"
     assert choice["winner"] in {"physics", "no_motion", "kalman", "drive_static", "drive_lagged"}
     assert set(choice["centroid_mm"]) == {"physics", "no_motion", "kalman", "drive_static", "drive_lagged"}
     assert min(choice["held_frames"]) > choice["fit_frames"][-1]          # held out at the end, in time
+    # where another predictor wins, its sections are there to aim at; where the physics does, nothing more
+    chosen = out / "prediction" / "chosen" / "sections.csv"
+    if choice["winner"] == "physics":
+        assert not chosen.exists()
+    else:
+        rows = np.genfromtxt(chosen, delimiter=",", names=True, dtype=None, encoding="utf-8")
+        assert set(rows["method"]) == {choice["winner"]} and len(rows) >= 2
     assert "the training frames' choice:" in (proc.stdout + proc.stderr).replace("\n", " ")
     kept = json.loads((out / "calibration" / "parameters.json").read_text())["fit"]["space_mapping"]["model_kept"]
     assert f"model kept (training cost, mm)</td><td>{kept} (search" in (out / "report" / "report.html").read_text()

@@ -183,4 +183,25 @@ def holdout_physics(observation, settings, training, log_path=None, progress=Non
     return {f: pred.masks[f] for f in fit + held if f in pred.masks}
 
 
-__all__ = ["HELD_OUT_SHARE", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks", "rank_on_holdout"]
+def write_chosen(folder, method: str, masks: dict[int, np.ndarray], frame_interval_s: float, pixel_mm: float) -> None:
+    """The chosen predictor's sections into ``folder``: ``frames/frame_NNNN.png`` (0/255) and
+    ``sections.csv`` (frame, time, the section's centroid in mm, the method) — what to aim at
+    when the data favour a predictor other than the physics."""
+    from pathlib import Path
+
+    from hifumotion.io.files import write_text
+    from hifumotion.io.writers import write_png_stack
+    from hifumotion.metrics import centroid
+
+    folder = Path(folder)
+    (folder / "frames").mkdir(parents=True, exist_ok=True)
+    rows = ["frame,time_s,section_centroid_x_mm,section_centroid_y_mm,method"]
+    for f in sorted(masks):
+        write_png_stack(folder / "frames", masks[f], prefix="frame_", start=int(f), digits=4)
+        if masks[f].any():
+            x, y = centroid(masks[f], pixel_mm)
+            rows.append(f"{int(f)},{f * frame_interval_s:.4f},{x:.4f},{y:.4f},{method}")
+    write_text(folder / "sections.csv", "\n".join(rows) + "\n")
+
+
+__all__ = ["HELD_OUT_SHARE", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks", "rank_on_holdout", "write_chosen"]

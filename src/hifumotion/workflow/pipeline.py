@@ -15,7 +15,8 @@ and ``hifumotion run CONFIG.toml`` (on a user's files) share:
    frame, each tracked frame assimilated by the reduced model, t + k predicted →
    ``prediction/online_loop.csv`` (each frame's latency), ``online_loop.json``;
 5. **choose** (``choose_predictor``): the physics and the predictors that know the same
-   inputs ranked on the last quarter of the training frames → ``prediction/choice.json``;
+   inputs ranked on the last quarter of the training frames → ``prediction/choice.json``,
+   and where another predictor wins, its validation sections → ``prediction/chosen/``;
 6. **score** the physics and the baselines (no motion, Kalman, the drive surrogates, NCC
    online) against the truth — a twin's, or the user's expert masks; without either, against the tracked
    contours, and the report says so → ``scores/`` (Table 4 CSV/JSON, overlays).
@@ -199,6 +200,12 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
         ev = evaluate(pred, cal.spec, reference, observation.frame_masks, observed.frames, truth_masks,
                       training, validation, observed.frame_interval_s, s.horizons_frames, now,
                       program=program, choice=choice)
+        if choice is not None and choice.winner != "physics" and choice.winner in ev.baseline_masks:
+            # the data favour another predictor: its sections beside the physics', for the aim
+            from hifumotion.prediction.choice import write_chosen
+
+            write_chosen(folder / "chosen", choice.winner, ev.baseline_masks[choice.winner],
+                         observed.frame_interval_s, float(observed.pixel_mm))
         if ev.online_masks:
             write_text(folder / "online.csv", online_csv(ev.online_masks, observation.frame_masks, pred.pixel_mm,
                                                          observed.frame_interval_s))
