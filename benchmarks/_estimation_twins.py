@@ -104,6 +104,20 @@ LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
         "physics": {"friction": 0.12},
         "protocol": {"peak_travel_mm": 6.0, "angle_deg": 38.0, "ramp_s": 7.75},
     }),
+    # a drive that reverses: in 4 mm over 4 s, drawn back to 2.5 mm by 5.5 s, then on to 7 mm by 9 s.
+    # Friction holds the sample where the bar left it; the bar must come back to it before it
+    # moves again — a motion that is not a linear image of the travel, where a model of contact
+    # and friction can earn its cost over a regression on the drive (set before any score)
+    "slide_reverse_s51": ("slide", {
+        "seed": 51,
+        "blob": {"size_mm": [28.0, 17.0, 23.0], "lobes": 5, "irregularity": 0.13},
+        "tissue": {"youngs_modulus_pa": 10000.0, "poisson_ratio": 0.47, "beta1": 2.0e5, "beta2": 0.5},
+        "bar": {"radius_mm": 6.0, "edge_radius_mm": 0.5, "control": "travel", "travel_mm": 7.0,
+                "schedule_times_s": [0.0, 4.0, 5.5, 9.0, 9.95], "schedule_travel_mm": [0.0, 4.0, 2.5, 7.0, 7.0],
+                "direction": [0.573576436351046, -0.8191520442889918, 0.0]},     # 35° from the vertical
+        "physics": {"friction": 0.15},
+        "protocol": {"name": "custom"},
+    }),
 }
 
 
