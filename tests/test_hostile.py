@@ -113,6 +113,12 @@ def build_scratch(root: Path) -> Path:
     (root / "deep_scene.toml").write_text(f"a = {deep}\n")
     (root / "deep_run.yaml").write_text(f"a: {deep}\n")
     (root / "deep_init.json").write_text(deep)
+    # YAML aliases: nine lists of nine nested nine deep (9⁹ values once expanded), and a node inside itself
+    laughs = 'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]\n' + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [" + ",".join([f"*{chr(97 + i)}"] * 9) + "]\n" for i in range(8))
+    (root / "laughs_run.yaml").write_text(laughs)
+    (root / "laughs_scene.yaml").write_text(laughs)
+    (root / "self_alias.yaml").write_text("a: &a [1, *a]\n")
     (root / "deep_resume.jsonl").write_text(deep + "\n")
     (root / "observed_deep").mkdir()
     (root / "observed_deep" / "setup.json").write_text('{"a": ' + deep + "}")
@@ -357,6 +363,9 @@ CASES = [
     (["simulate", "scene_nested.toml", "-o", "out"], "scene_nested.toml"),
     (["experiment", "--config", "deep_scene.toml", "-o", "out"], "deep_scene.toml"),
     (["run", "deep_run.yaml", "-o", "out"], "deep_run.yaml"),
+    (["run", "laughs_run.yaml", "-o", "out"], "laughs_run.yaml"),
+    (["simulate", "laughs_scene.yaml", "-o", "out"], "laughs_scene.yaml"),
+    (["run", "self_alias.yaml", "-o", "out"], "self_alias.yaml"),
     (["track", "observed_deep", "-o", "out"], "setup.json"),
     (["calibrate", "observed_deep", "-o", "out"], "setup.json"),
     (["segment", "ph/images/phantom.png", "--init", "deep_init.json", "-o", "out"], "deep_init.json"),
@@ -556,6 +565,24 @@ def test_valid_detached_headers_still_read(tmp_path):
         sitk.WriteImage(image, str(tmp_path / name), useCompression=compressed)
         read = read_itk_file(tmp_path / name)["array"]
         assert read.shape == (3, 20, 30)
+
+
+def test_yaml_aliases_are_walked_once_and_refused_when_they_expand_past_the_limit():
+    from hifumotion.errors import InputError
+    from hifumotion.io.structured import MAX_VALUES, parse_text, value_shape
+
+    # shared nodes: a list used twice counts twice, but is walked once
+    shared = [1, 2, 3]
+    assert value_shape({"a": shared, "b": shared}) == (2, 1 + 2 * 4)
+    laughs = 'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]\n' + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [" + ",".join([f"*{chr(97 + i)}"] * 9) + "]\n" for i in range(8))
+    with pytest.raises(InputError, match="aliases are expanded"):
+        parse_text(laughs, "yaml", "x.yaml")
+    # the same aliases a few levels deep are a valid file (9⁵ values)
+    few = laughs.split("f:")[0]
+    assert value_shape(parse_text(few, "yaml", "x.yaml"))[1] < MAX_VALUES
+    with pytest.raises(InputError, match="refers to itself"):
+        parse_text("a: &a [1, *a]\n", "yaml", "x.yaml")
 
 
 def test_nesting_depth_is_counted_without_recursion():
