@@ -465,6 +465,25 @@ def test_a_mistake_is_one_line_naming_it_and_changes_nothing(scratch, argv, word
     assert not [p for p in scratch.iterdir() if p.name.endswith(".partial")]
 
 
+def test_a_model_its_solver_cannot_factor_is_one_line_and_changes_nothing(scratch, monkeypatch):
+    """PARDISO's failure deep inside a command (here made to happen where ``score`` works) is the
+    model's settings' fault, not a bug: one line, status 2, no output."""
+    import hifumotion.scoring as scoring
+    from hifumotion.creep.linear import FactorError
+
+    def singular(*args, **kwargs):
+        raise FactorError("PARDISO phase 22 failed with error -4")
+
+    monkeypatch.chdir(scratch)
+    monkeypatch.setattr(scoring, "score_masks", singular)
+    before = _snapshot(scratch)
+    status, err = _main(["score", "frame_masks", "frame_masks", "--spacing", "0.2", "-o", "out"])
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert status == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert "linear system could not be solved" in lines[0] and "PARDISO phase 22" in lines[0]
+    assert _snapshot(scratch) == before and not (scratch / "out").exists()
+
+
 def test_enough_hostile_cases():
     assert len(CASES) >= 300 and len({c[0][0] for c in CASES}) >= 15
 

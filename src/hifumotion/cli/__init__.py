@@ -107,6 +107,14 @@ def main(argv: Optional[list[str]] = None) -> None:
              "use a coarser resolution or a smaller input")
     except OSError as exc:
         fail(_os_error(exc))
+    except RuntimeError as exc:
+        linear = sys.modules.get("hifumotion.creep.linear")     # loaded wherever a solve could fail
+        if linear is None or not isinstance(exc, linear.FactorError):
+            raise
+        # the model's settings gave a linear system its sparse solver could not factor or solve
+        fail(f"the tissue model's linear system could not be solved ({exc}): its settings give a singular or "
+             "badly conditioned system; check the model's settings (the tissue's material, its resolution, "
+             "the scene) or try another integrator")
     except SystemExit:
         if _stdout_broken():
             _quiet_stdout()
