@@ -119,6 +119,9 @@ def build_scratch(root: Path) -> Path:
     (root / "laughs_run.yaml").write_text(laughs)
     (root / "laughs_scene.yaml").write_text(laughs)
     (root / "self_alias.yaml").write_text("a: &a [1, *a]\n")
+    # contour CSVs: a row short of a field, a coordinate that is not a finite number
+    (root / "short_row.csv").write_text("frame,x_px,y_px\n0,10,10\n0,20\n0,20,20\n")
+    (root / "nan_point.csv").write_text("frame,x_px,y_px\n0,10,10\n0,20,nan\n0,20,20\n")
     (root / "deep_resume.jsonl").write_text(deep + "\n")
     (root / "observed_deep").mkdir()
     (root / "observed_deep" / "setup.json").write_text('{"a": ' + deep + "}")
@@ -264,6 +267,8 @@ CASES = [
     (["calibrate", "observed_field", "--objective", "shape", "-o", "out"], "--objective"),
     (["calibrate", "observed_field", "--tracking", "magic", "-o", "out"], "--tracking"),
     (["segment", "ph/images/phantom.png", "--init", "missing.json", "-o", "out"], "missing.json"),
+    (["segment", "ph/images/phantom.png", "--init", "short_row.csv", "-o", "out"], "line 3"),
+    (["segment", "ph/images/phantom.png", "--init", "nan_point.csv", "-o", "out"], "finite"),
     (["segment", "ph/images/phantom.png", "--init", "bad.json", "-o", "out"], "bad.json"),
     (["segment", "ph/images/phantom.png", "--init", "huge_init.json", "-o", "out"], "huge_init.json"),
     (["segment", "ph/images/phantom.png", "--init", "negative_init.json", "-o", "out"], "negative_init.json"),

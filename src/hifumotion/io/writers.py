@@ -171,12 +171,17 @@ def read_contours_csv(path: str | Path, spacing_mm=None) -> dict[str, Contour]:
         raise InputError(f"expected columns 'frame' and 'x_px, y_px' or 'x_mm, y_mm', got {sorted(cols)}", p)
     sp = as_spacing_mm(spacing_mm)
     grouped: dict[str, list[tuple[float, float]]] = {}
-    try:
-        for r in rows:
-            xy = (float(r["x_px"]), float(r["y_px"])) if use_px else (float(r["x_mm"]) / sp[1], float(r["y_mm"]) / sp[0])
-            grouped.setdefault(r["frame"], []).append(xy)
-    except ValueError as exc:
-        raise InputError(f"non-numeric coordinate ({exc})", p) from None
+    names = ("frame", "x_px", "y_px") if use_px else ("frame", "x_mm", "y_mm")
+    for line, r in enumerate(rows, start=2):           # line 1 is the header
+        if any(r.get(n) is None for n in names):
+            raise InputError(f"line {line} has fewer fields than the header (expected {', '.join(names)})", p)
+        try:
+            x, y = float(r[names[1]]), float(r[names[2]])
+        except ValueError:
+            raise InputError(f"line {line}: non-numeric coordinate ({r[names[1]]!r}, {r[names[2]]!r})", p) from None
+        if not (np.isfinite(x) and np.isfinite(y)):
+            raise InputError(f"line {line}: coordinates must be finite numbers, got ({x}, {y})", p)
+        grouped.setdefault(r["frame"], []).append((x, y) if use_px else (x / sp[1], y / sp[0]))
     try:
         return {k: Contour(np.asarray(v), sp) for k, v in grouped.items()}
     except InputError as exc:
