@@ -676,6 +676,26 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     hold = np.mean([dice(tracked_last, truth_masks[f]) for f in valid])
     assert peers["peers"]["no_motion"]["dsc_mean"] == pytest.approx(hold, abs=1e-9)
     assert peers["ranking"][0]["centroid_mean_mm"] == min(r["centroid_mean_mm"] for r in peers["ranking"])
+    # a calibration folder edited by hand: each mistake one line naming the file, no traceback, no output
+    for field, value in (("frames", "forty"), ("training_frames", "abc"), ("frame_interval_s", 0.0),
+                         ("frames", 10 ** 9)):
+        bad = tmp_path / f"bad_{field}_{value}"
+        shutil.copytree(cal, bad)
+        meta = json.loads((bad / "parameters.json").read_text())
+        meta[field] = value
+        (bad / "parameters.json").write_text(json.dumps(meta))
+        out = subprocess.run(cli + ["predict", str(bad), "-o", str(tmp_path / "never")], capture_output=True,
+                             text=True, timeout=120)
+        lines = [ln for ln in (out.stdout + out.stderr).splitlines() if ln.strip()]
+        assert out.returncode == 2 and len(lines) == 1 and "parameters.json" in lines[0], out.stderr
+        assert field in lines[0] and not (tmp_path / "never").exists()
+    bad = tmp_path / "bad_reference"
+    shutil.copytree(cal, bad)
+    ref = bad / "observation" / "reference.npz"
+    ref.write_bytes(ref.read_bytes()[:100])             # truncated
+    out = subprocess.run(cli + ["predict", str(bad), "-o", str(tmp_path / "never")], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 2 and "reference.npz" in out.stderr and "Traceback" not in out.stderr, out.stderr
     # existing output is never overwritten without --overwrite
     again = subprocess.run(cli + ["predict", str(cal), "-o", str(pred)], capture_output=True, text=True)
     assert again.returncode == 2 and "overwrite" in (again.stdout + again.stderr)

@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -164,7 +165,8 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
         settings = ModelSettings(**meta["model_settings"])
         interval = float(meta["frame_interval_s"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"malformed calibration ({exc})", pj) from None
+        raise InputError(f"malformed calibration ({' '.join(str(exc).split())[:200]})", pj) from None
+    _check_series(meta, interval, pj)
     scene = load_scene(folder / "model" / "scene.toml")
     tissue, volume = read_particles_csv(folder / "model" / "tissue_particles.csv")
     points, _ = read_particles_csv(folder / "model" / "contour_points.csv")
@@ -174,12 +176,33 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
     ref_path = folder / "observation" / "reference.npz"
     if not ref_path.is_file():
         raise InputError("no such file", ref_path)
-    z = np.load(ref_path)
-    plane = Plane(tuple(z["plane_origin_mm"].tolist()), tuple(z["plane_u"].tolist()), tuple(z["plane_v"].tolist()),
-                  tuple(int(v) for v in z["plane_shape"]), float(z["pixel_mm"]))
-    ref = ReferenceShape(z["frame0_mask"].astype(bool), plane, z["rec_distance_mm"].astype(float),
-                         float(z["rec_voxel_mm"]), tuple(z["rec_origin_mm"].tolist()))
+    try:
+        with np.load(ref_path) as z:
+            plane = Plane(tuple(z["plane_origin_mm"].tolist()), tuple(z["plane_u"].tolist()),
+                          tuple(z["plane_v"].tolist()), tuple(int(v) for v in z["plane_shape"]), float(z["pixel_mm"]))
+            ref = ReferenceShape(z["frame0_mask"].astype(bool), plane, z["rec_distance_mm"].astype(float),
+                                 float(z["rec_voxel_mm"]), tuple(z["rec_origin_mm"].tolist()))
+    except (OSError, EOFError, KeyError, TypeError, ValueError, zipfile.BadZipFile) as exc:
+        raise InputError(f"unreadable frame-0 reference ({' '.join(str(exc).split())[:160]}); expected the npz "
+                         "hifumotion calibrate writes (plane_*, pixel_mm, frame0_mask, rec_*)", ref_path) from None
     return spec, k, ref, meta
+
+
+def _check_series(meta: dict, interval_s: float, path: Path) -> None:
+    """``parameters.json``'s series: a whole number of frames (2 … ``resources.MAX_FRAMES``),
+    training frames among them, a finite frame interval > 0 — each named where it is not."""
+    from hifumotion.resources import MAX_FRAMES
+
+    frames = meta.get("frames")
+    if isinstance(frames, bool) or not isinstance(frames, int) or not 2 <= frames <= MAX_FRAMES:
+        raise InputError(f"frames must be a whole number of frames, 2 … {MAX_FRAMES:,}, got {frames!r}", path)
+    training = meta.get("training_frames")
+    if (not isinstance(training, list) or not training
+            or any(isinstance(f, bool) or not isinstance(f, int) or not 0 <= f < frames for f in training)):
+        raise InputError(f"training_frames must be a list of frame numbers in 0 … {frames - 1}, got "
+                         f"{str(training)[:60]}", path)
+    if not (np.isfinite(interval_s) and 0 < interval_s <= 3600):
+        raise InputError(f"frame_interval_s must be a finite time > 0 s (at most an hour), got {interval_s!r}", path)
 
 
 def _surface(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
