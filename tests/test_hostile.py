@@ -349,6 +349,9 @@ CASES = [
     (["predict", "missing_dir", "-o", "out"], "missing_dir"),
     (["score", "missing_dir", "ph"], "missing_dir"),
     (["score", "ph", "ph", "--spacing", "-1"], "--spacing"),
+    (["score", "frame_masks", "frame_masks", "--spacing", "1e-300"], "--spacing"),
+    (["score", "frame_masks", "frame_masks", "--spacing", "1e-320"], "--spacing"),
+    (["segment", "ph/images/phantom.png", "--init", "short_row.csv", "--spacing", "1e-320", "-o", "out"], "--spacing"),
     # hifumotion demo / run
     (["demo", "--particles", "0", "-o", "out"], "--particles"),
     (["demo", "--preset", "nope", "-o", "out"], "--preset"),

@@ -15,11 +15,16 @@ import numpy as np
 from hifumotion.errors import InputError
 
 
+#: the pixel sizes an image may have (mm): 0.1 µm (below any ultrasound microscope's) to 10 cm
+PIXEL_MM_RANGE = (1e-4, 100.0)
+
+
 def as_spacing_mm(spacing: float | tuple[float, float] | np.ndarray | None, what: str = "spacing_mm") -> tuple[float, float]:
     """Return a pixel spacing as ``(row_mm, col_mm)``; a scalar means square pixels.
 
     ``None`` gives ``(1.0, 1.0)`` (one pixel = one unit). Raises :class:`InputError`
-    for anything that is not one or two finite positive numbers.
+    for anything that is not one or two finite numbers within :data:`PIXEL_MM_RANGE` (a
+    spacing of 10⁻³⁰⁰ mm is a typing mistake, and its pixel counts overflow downstream).
     """
     if spacing is None:
         return (1.0, 1.0)
@@ -28,6 +33,9 @@ def as_spacing_mm(spacing: float | tuple[float, float] | np.ndarray | None, what
         values = np.repeat(values, 2)
     if values.size != 2 or not np.all(np.isfinite(values)) or np.any(values <= 0):
         raise InputError(f"expected one or two positive pixel sizes in mm (row, col), got {spacing!r}", what)
+    lo, hi = PIXEL_MM_RANGE
+    if np.any(values < lo) or np.any(values > hi):
+        raise InputError(f"expected pixel sizes of {lo:g} … {hi:g} mm, got {spacing!r}", what)
     return (float(values[0]), float(values[1]))
 
 

@@ -52,6 +52,14 @@ def parse_spacing(text: Optional[str]) -> Optional[tuple[float, float]]:
     return as_spacing_mm(values, "--spacing")
 
 
+def pixel_size(value: Optional[float]) -> Optional[float]:
+    """Typer callback: a pixel size in mm within :data:`~hifumotion.sequence.PIXEL_MM_RANGE`
+    (None passes: the option was not given)."""
+    from hifumotion.sequence import as_spacing_mm
+
+    return None if value is None else as_spacing_mm(value, "--spacing")[0]
+
+
 def positive(value: Optional[float]) -> Optional[float]:
     """Typer callback: a finite number > 0 (None passes: the option was not given)."""
     import math

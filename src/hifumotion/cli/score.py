@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from hifumotion.cli.app import app, positive
+from hifumotion.cli.app import app, pixel_size
 from hifumotion.console import console
 from hifumotion.errors import InputError
 
@@ -17,7 +17,7 @@ def score(
     prediction_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png predicted masks (0/255)."),
     truth_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png true masks (an experiment's truth/)."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New folder for score.csv and score.json (default PREDICTION_DIR/score)."),
-    spacing: Optional[float] = typer.Option(None, "--spacing", callback=positive, help="Pixel size in mm (default: the truth's parameters.json)."),
+    spacing: Optional[float] = typer.Option(None, "--spacing", callback=pixel_size, help="Pixel size in mm (default: the truth's parameters.json)."),
     images: Optional[Path] = typer.Option(None, "--images", help="The observed frames (frame_NNNN.png) for the overlays (default: TRUTH_DIR/../observed/frames if present)."),
     calibration: Optional[Path] = typer.Option(None, "--calibration", help="The calibration folder the prediction came from: its tracked frames, training frames and the push's program (the observed setup.json) put the predictors that know the same inputs beside it (holding still, Kalman, the drive surrogates)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
