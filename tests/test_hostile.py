@@ -108,6 +108,7 @@ def build_scratch(root: Path) -> Path:
     (root / "run_tip.toml").write_text(_run_config(tip="[500.0, 19.0, 18.7]"))
     (root / "run_key.toml").write_text(_run_config(extra="\n[estimation]\nparticels = 300\n"))
     (root / "run_particles.toml").write_text(_run_config(extra="\n[estimation]\nparticles = 1000000000\n"))
+    (root / "run_horizons.toml").write_text(_run_config(extra="\n[estimation]\nhorizons_frames = [-4, 0]\n"))
     # nested thousands of levels (a RecursionError in any parser), a few hundred (past the parser)
     deep = "[" * 5000 + "]" * 5000
     (root / "deep_scene.toml").write_text(f"a = {deep}\n")
@@ -365,6 +366,7 @@ CASES = [
     (["run", "run_tip.toml", "-o", "out"], "tip"),
     (["run", "run_key.toml", "-o", "out"], "particels"),
     (["run", "run_particles.toml", "-o", "out"], "particles"),
+    (["run", "run_horizons.toml", "-o", "out"], "horizons_frames"),
     (["run", "fifo.png", "-o", "out"], "fifo.png"),
     # nesting thousands of levels deep, or a few hundred, in every structured file a command reads
     (["simulate", "deep_scene.toml", "-o", "out"], "deep_scene.toml"),
@@ -490,6 +492,17 @@ def test_a_model_its_solver_cannot_factor_is_one_line_and_changes_nothing(scratc
     assert status == 2 and len(lines) == 1 and "Traceback" not in err, err
     assert "linear system could not be solved" in lines[0] and "PARDISO phase 22" in lines[0]
     assert _snapshot(scratch) == before and not (scratch / "out").exists()
+
+
+def test_a_runs_frames_are_checked_against_each_other_before_any_work():
+    from hifumotion.errors import InputError
+    from hifumotion.workflow.pipeline import check_protocol
+
+    check_protocol([20, 30], [110, 120], [4, 6], 200)          # the paper's protocol passes
+    with pytest.raises(InputError, match="validation_frames"):
+        check_protocol([20, 30, 110], [110, 120], [4], 200)    # frame 110 both fitted and scored
+    with pytest.raises(InputError, match="horizons_frames"):
+        check_protocol([20, 30], [110, 120], [4, 100_000], 200)
 
 
 def test_enough_hostile_cases():

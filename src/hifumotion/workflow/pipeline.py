@@ -33,8 +33,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
+from hifumotion.errors import InputError
 from hifumotion.estimation.settings import CalibrationSettings
 
 if TYPE_CHECKING:      # the observed folder's reader pulls the image stack: imported where it runs
@@ -57,6 +58,15 @@ class EstimationConfig(CalibrationSettings):
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
+    @field_validator("horizons_frames")
+    @classmethod
+    def _horizons(cls, v):
+        from hifumotion.resources import MAX_FRAMES
+
+        if any(not 1 <= h <= MAX_FRAMES for h in v):
+            raise ValueError(f"horizons are whole frames from 1 to {MAX_FRAMES:,} ahead, got {v}")
+        return sorted(set(v))
+
     choose_predictor: bool = Field(False, description="rank the physics and the predictors that know the same inputs (the drive surrogates, the Kalman filter, holding still) on the last quarter of the training frames, the physics calibrated again on the earlier ones (one more calibration), and record which the data support (prediction/choice.json, the scores, the report)")
 
 
@@ -81,6 +91,19 @@ class PipelineOutcome:
         spec = self.calibration.spec
         window = (self.validation[-1] - self.validation[0]) * spec.frame_interval_s
         return self.predict_s / window if window > 0 else float("nan")
+
+
+def check_protocol(training: list[int], validation: list[int], horizons: list[int], n_frames: int) -> None:
+    """The frames of a run, checked against each other before any work: no frame both trained
+    on and scored, every horizon shorter than the series (each an :class:`InputError` naming
+    the setting)."""
+    both = sorted(set(training) & set(validation))
+    if both:
+        raise InputError(f"frames {both[:5]}{'…' if len(both) > 5 else ''} are both training and validation frames; "
+                         "a prediction is scored on frames the calibration did not see", "estimation.validation_frames")
+    if any(h >= n_frames for h in horizons):
+        raise InputError(f"horizons must be shorter than the series ({n_frames} frames), got {list(horizons)}",
+                         "estimation.horizons_frames")
 
 
 def observe_and_calibrate(observed: Observed, folder: str | Path, settings: EstimationConfig, training: list[int],
@@ -154,6 +177,7 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
     auto_train, auto_valid = default_frames(n)
     training = parse_frames(s.training_frames, n, "estimation.training_frames") or auto_train
     validation = parse_frames(s.validation_frames, n, "estimation.validation_frames") or auto_valid
+    check_protocol(training, validation, s.horizons_frames, n)
 
     observation, cal = observe_and_calibrate(observed, out / "calibration", s, training, contours_csv,
                                              record=record, progress=tell, observed_dir=observed_dir)
@@ -246,4 +270,5 @@ def outcome_summary(o: PipelineOutcome) -> dict:
     return {k: (round(v, 5) if isinstance(v, float) and np.isfinite(v) else v) for k, v in out.items()}
 
 
-__all__ = ["EstimationConfig", "PipelineOutcome", "observe_and_calibrate", "run_pipeline", "outcome_summary"]
+__all__ = ["EstimationConfig", "PipelineOutcome", "check_protocol", "observe_and_calibrate", "run_pipeline",
+           "outcome_summary"]
