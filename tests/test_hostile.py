@@ -308,6 +308,7 @@ CASES = [
     # hifumotion reconstruct
     (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--voxel", "0", "-o", "out"], "--voxel"),
     (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--voxel", "0.001", "-o", "out"], "--voxel"),
+    (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--voxel", "1e9", "-o", "out"], "--voxel"),
     (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--particle-spacing", "0.001", "-o", "out"],
      "--particle-spacing"),
     (["reconstruct", "masks", "--slice-spacing", "1", "--spacing", "0.2", "--particle-spacing", "-1", "-o", "out"],

@@ -305,6 +305,12 @@ def reconstruct(masks: Any, spacing_mm: Any, slice_positions_mm: Any, voxel_mm: 
     # bounding box of the tissue in mm, with a margin of two voxels
     any_inside = (d > 0).any(axis=0)
     rows, cols = np.nonzero(any_inside)
+    # a voxel must resolve the tissue: marching cubes finds no surface in a volume a voxel or two wide
+    extent = min((rows.max() - rows.min() + 1) * row_mm, (cols.max() - cols.min() + 1) * col_mm,
+                 float(pos[-1] - pos[0]))
+    if vox > extent / 2:
+        raise InputError(f"voxel size {vox:g} mm does not resolve the tissue (its smallest extent is {extent:.3g} mm); "
+                         f"expected at most {extent / 2:.3g} mm", "voxel size")
     x0, x1 = (cols.min() - 2) * col_mm - 2 * vox, (cols.max() + 2) * col_mm + 2 * vox
     y0, y1 = (rows.min() - 2) * row_mm - 2 * vox, (rows.max() + 2) * row_mm + 2 * vox
     # the distance volume, its interpolation planes and marching cubes' copies: ~ 10 float64 per voxel
