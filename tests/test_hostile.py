@@ -331,6 +331,9 @@ CASES = [
     (["experiment", "--config", "missing.toml", "-o", "out"], "missing.toml"),
     (["experiment", "--preset", "nope", "-o", "out"], "nope"),
     (["experiment", "--seed", "-1", "-o", "out"], "--seed"),
+    # images no machine holds: refused before the physics runs, naming the imaging settings
+    (["experiment", "--preset", "small", "--set", "imaging.pixel_mm=0.0001", "-o", "out"], "imaging"),
+    (["experiment", "--preset", "small", "--set", "imaging.width_mm=1000000", "-o", "out"], "imaging"),
     (["experiment", "--preset", "small"], "--output"),
     # hifumotion calibrate / predict / score
     (["calibrate", "ph", "-o", "out"], "setup.json"),

@@ -182,8 +182,9 @@ masks = "{folder / 'truth' / 'frames'}"
     # two resolutions: the report says which one predicts, as parameters.json does
     # the predictor the training frames support, chosen on their last quarter and told
     choice = json.loads((out / "prediction" / "choice.json").read_text())
-    assert choice["winner"] in {"physics", "no_motion", "kalman", "drive_static", "drive_lagged"}
-    assert set(choice["centroid_mm"]) == {"physics", "no_motion", "kalman", "drive_static", "drive_lagged"}
+    ranked = {"physics", "physics_anchored", "physics_corrected", "no_motion", "kalman", "drive_static", "drive_lagged"}
+    assert set(choice["centroid_mm"]) == ranked and choice["winner"] in ranked
+    assert choice["winner"] == min(choice["centroid_mm"], key=choice["centroid_mm"].get)
     assert min(choice["held_frames"]) > choice["fit_frames"][-1]          # held out at the end, in time
     # where another predictor wins, its sections are there to aim at; where the physics does, nothing more
     chosen = out / "prediction" / "chosen" / "sections.csv"

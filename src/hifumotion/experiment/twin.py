@@ -321,6 +321,21 @@ def sweep_images(probe: im.Probe, sweep_masks: np.ndarray, echo_map, trans, seed
     return np.stack(images)
 
 
+def check_image_memory(cfg: TwinConfig) -> None:
+    """Refuse, before the physics runs, imaging settings whose images this machine cannot hold:
+    every frame and sweep plane (at most the pool's depth over the sweep's gap) as grey levels,
+    masks and the truth's sections (6 bytes a pixel), and the B-mode simulation's working
+    arrays (about 20 float64 images)."""
+    from hifumotion.resources import check_memory
+
+    im_cfg = cfg.imaging
+    rows, cols = im_cfg.depth_mm / im_cfg.pixel_mm, im_cfg.width_mm / im_cfg.pixel_mm
+    planes = im_cfg.frames + cfg.tank.size_mm[2] / im_cfg.sweep_gap_mm + 1
+    need = rows * cols * (6.0 * planes + 20 * 8.0)
+    check_memory(need, f"images of {rows:,.0f} × {cols:,.0f} px ({im_cfg.depth_mm:g} × {im_cfg.width_mm:g} mm at "
+                 f"{im_cfg.pixel_mm:g} mm), {planes:,.0f} of them,", "imaging (pixel_mm, width_mm, depth_mm, frames)")
+
+
 def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None = None) -> TwinResult:
     """Run the experiment (module docstring) and write ``folder/observed`` and ``folder/truth``.
 
@@ -332,6 +347,7 @@ def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None
     ``particles/`` (VTU + PVD for ParaView), ``tissue_trajectory.npz``, ``bar_pose.csv``,
     ``motion.json``, ``scene.toml`` + ``blob_particles.csv`` (re-runnable).
     """
+    check_image_memory(cfg)
     folder = Path(folder)
     obs, tru = folder / "observed", folder / "truth"
     for d in (obs / "sweep", obs / "frames", tru / "sweep", tru / "frames", tru / "particles"):
