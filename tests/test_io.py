@@ -322,7 +322,7 @@ def test_output_folder_never_clobbers(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging folder left behind
 
 
-def test_overwrite_never_deletes_what_hifumotion_did_not_write(tmp_path):
+def test_overwrite_never_deletes_what_hifumotion_did_not_write(tmp_path, capsys):
     target = tmp_path / "run"
     with output_folder(target) as out:
         (out / "figures").mkdir()
@@ -351,6 +351,8 @@ def test_overwrite_never_deletes_what_hifumotion_did_not_write(tmp_path):
         (out / "run_info.json").write_text("{}")
     aside = [p for p in tmp_path.iterdir() if p.name.startswith("run.replaced-")]
     assert len(aside) == 1 and (aside[0] / "maybe_mine.txt").read_text() == "?"
+    # and the move is said, naming where the files went
+    assert aside[0].name in " ".join(capsys.readouterr().err.split())
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("run.replaced-")) == ["run"]
 
 

@@ -6,7 +6,8 @@ with :func:`os.replace`, so a reader never sees half a file and a crash never
 leaves one. A run's output folder is prepared by :func:`output_folder`: its
 ``run_info.json`` lists every file and folder the run wrote, and ``--overwrite``
 replaces a folder only when nothing else is in it (one whose ``run_info.json`` lists
-nothing, an older version's, is moved aside to ``NAME.replaced-*``, never deleted). Files and folders are made with
+nothing, an older version's, is moved aside to ``NAME.replaced-*``, never deleted, and the
+move is said on standard error). Files and folders are made with
 the permissions the umask gives (not the temporary files' private 0600/0700).
 """
 
@@ -276,5 +277,11 @@ def output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Itera
         staging.rename(final)
         if not unlisted:
             shutil.rmtree(retired, ignore_errors=True)
+        else:
+            from hifumotion.console import console
+
+            # said, not silent: the user's files may be among what was moved
+            console.print(f"{shown}: its earlier contents (not listed as hifumotion's own, so perhaps yours) were "
+                          f"moved to {retired}", highlight=False, soft_wrap=True)
     else:
         staging.rename(final)
