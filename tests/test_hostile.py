@@ -561,6 +561,22 @@ def test_a_fifo_is_refused_at_once(scratch):
     assert proc.returncode == 2 and "fifo.png" in proc.stderr and "regular file" in proc.stderr
 
 
+def test_a_fifo_among_an_observed_folders_frames_is_refused_not_waited_on(tmp_path):
+    """Every frame of an observed folder is read through one reader, which takes regular files
+    only: a FIFO named like a frame would block the read for ever."""
+    import imageio.v3 as iio
+
+    from hifumotion.errors import InputError
+    from hifumotion.observed.folder import _stack
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    iio.imwrite(frames / "frame_0000.png", np.zeros((16, 16), np.uint8))
+    os.mkfifo(frames / "frame_0001.png")
+    with pytest.raises(InputError, match="frame_0001.png"):
+        _stack(frames, "frame_", (16, 16))
+
+
 def _twin_being_written(folder: Path, pattern: str = ".twin.*.partial", **popen) -> subprocess.Popen:
     """``experiment --preset small -o twin`` started in ``folder``, once its staging folder (``pattern``) exists."""
     proc = subprocess.Popen(CLI + ["-q", "experiment", "--preset", "small", "--seed", "5", "-o", "twin"],

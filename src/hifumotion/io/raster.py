@@ -36,6 +36,9 @@ def _read_tiff(path: Path) -> np.ndarray:
 
 def read_raster_array(path: Path) -> np.ndarray:
     """Grey frames ``(T, H, W)`` of one image file, in the file's own dtype."""
+    from hifumotion.io.files import require_regular_file
+
+    require_regular_file(path, "image file")      # a FIFO among the frames would block the read for ever
     suffix = full_suffix(path)
     try:
         if suffix in (".tif", ".tiff"):
