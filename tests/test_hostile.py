@@ -712,3 +712,37 @@ def test_ctrl_c_during_a_calibration_is_one_line_and_leaves_nothing(small_twin, 
     assert proc.returncode == 130, err
     assert "Traceback" not in err and len(lines) <= 2, err
     assert not list(tmp_path.glob(".cal*")) and not (tmp_path / "cal").exists()
+
+
+def _tiny_observed(folder: Path, sweep_z_mm=None, water_depth_mm: float = 6.0) -> Path:
+    """A minimal observed folder (4 sweep planes, 20 frames of 24 × 24 px) written by hifumotion's own writer."""
+    from hifumotion.contour import Contour
+    from hifumotion.observed.folder import write_observed
+    from hifumotion.observed.setup import Setup
+
+    setup = Setup(frame_interval_s=0.05, frames=20,
+                  imaging={"image_shape": (24, 24), "pixel_mm": 0.5, "row0_col0_mm": (0.0, 0.0),
+                           "frames_plane_z_mm": 5.0, "sweep_z_mm": sweep_z_mm or []},
+                  tank={"size_mm": (12.0, 12.0, 12.0), "water_depth_mm": water_depth_mm},
+                  bar={"tip_at_rest_mm": (6.0, 11.0, 5.0)})
+    images = np.zeros((20, 24, 24), np.uint8)
+    square = Contour(np.array([[8.0, 8.0], [16.0, 8.0], [16.0, 16.0], [8.0, 16.0]]), 0.5)
+    return write_observed(folder, setup, images[:4], np.arange(4) * 1.0 + 3.5, images, square)
+
+
+def test_setup_that_contradicts_its_own_folder_is_refused(tmp_path):
+    from hifumotion.errors import InputError
+    from hifumotion.observed import load_observed
+    from hifumotion.observed.setup import read_setup
+
+    ok = _tiny_observed(tmp_path / "ok", sweep_z_mm=[3.5, 4.5, 5.5, 6.5])
+    assert len(load_observed(ok).sweep_z_mm) == 4
+    wrong = _tiny_observed(tmp_path / "wrong", sweep_z_mm=[3.5, 4.5])      # two positions for four planes
+    with pytest.raises(InputError, match="sweep_z_mm"):
+        load_observed(wrong)
+    deep = _tiny_observed(tmp_path / "deep")
+    data = json.loads((deep / "setup.json").read_text())
+    data["tank"]["water_depth_mm"] = 1e9                                   # deeper than the pool is high
+    (deep / "setup.json").write_text(json.dumps(data))
+    with pytest.raises(InputError, match="water_depth_mm"):
+        read_setup(deep / "setup.json")

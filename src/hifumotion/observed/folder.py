@@ -141,6 +141,11 @@ def load_observed(folder: str | Path) -> Observed:
         raise InputError(f"{len(z)} positions for {len(sweep)} sweep images", pos_path)
     if not np.all(np.isfinite(z)) or (len(z) > 1 and not np.all(np.diff(z) > 0)):
         raise InputError("the planes' z_mm must be finite and increasing", pos_path)
+    said = setup.imaging.sweep_z_mm
+    if said and (len(said) != len(z) or not np.allclose(said, z, rtol=0, atol=1e-3)):
+        raise InputError(f"imaging.sweep_z_mm lists {len(said)} planes that do not match sweep_positions.csv's "
+                         f"{len(z)} ({pos_path.name}); give the same positions in both, or leave sweep_z_mm empty",
+                         setup_path)
     steps = np.diff(z)
     even = len(z) > 1 and np.allclose(steps, steps[0], rtol=1e-3, atol=1e-6)
     _same_as_pngs(root / "sweep.nii.gz", sweep, "sweep/", setup.pixel_mm,

@@ -184,6 +184,9 @@ class Setup(ConfigModel):
             raise ValueError(f"initial_contour_frame {self.initial_contour_frame} is not one of the "
                              f"{self.frames} frames")
         check_bar_in_tank(self.bar, self.tank)
+        if self.tank.water_depth_mm > self.tank.size_mm[1]:
+            raise ValueError(f"tank.water_depth_mm ({self.tank.water_depth_mm:g}) is deeper than the pool is high "
+                             f"(tank.size_mm[1] = {self.tank.size_mm[1]:g})")
         return self
 
     @property
