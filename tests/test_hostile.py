@@ -355,6 +355,8 @@ CASES = [
     (["score", "missing_dir", "ph"], "missing_dir"),
     (["score", "ph", "ph", "--spacing", "-1"], "--spacing"),
     (["score", "frame_masks", "frame_masks", "--spacing", "1e-300"], "--spacing"),
+    (["score", "frame_masks", "frame_masks", "--spacing", "0.2", "--images", "empty_folder", "-o", "out"],
+     "empty_folder"),
     (["score", "frame_masks", "frame_masks", "--spacing", "1e-320"], "--spacing"),
     (["segment", "ph/images/phantom.png", "--init", "short_row.csv", "--spacing", "1e-320", "-o", "out"], "--spacing"),
     # hifumotion demo / run

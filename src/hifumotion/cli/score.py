@@ -45,6 +45,8 @@ def score(
     frames_dir = images if images is not None else truth_dir.parent / "observed" / "frames"
     if images is not None and not images.is_dir():
         raise InputError("no such folder of observed frames", images)
+    if images is not None and not any((images / f"frame_{r['frame']:04d}.png").is_file() for r in table.rows):
+        raise InputError("none of the scored frames is here as frame_NNNN.png to draw the overlays on", images)
     out_dir = output if output is not None else prediction_dir / "score"
     with output_folder(out_dir, overwrite, inputs=(prediction_dir, truth_dir, images, calibration)) as out:
         write_text(out / "score.csv", table.to_csv())
@@ -59,6 +61,7 @@ def score(
                         if (p := frames_dir / f"frame_{f:04d}.png").is_file()}
             if pictures:
                 overlay_figure(pictures, truth, predicted, wanted, out / "overlays.png")
+
         record.write(out)
     for name, s in table.summary().items():
         console.print(f"{name:10s} {len(s['frames']):3d} frames  DSC mean {s['dsc']['mean']:.4f} min "
