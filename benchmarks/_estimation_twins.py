@@ -118,6 +118,27 @@ LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
         "physics": {"friction": 0.15},
         "protocol": {"name": "custom"},
     }),
+    # two more reversals: other seeds, shapes, materials, bars, frictions, angles and schedules
+    "slide_reverse_s52": ("slide", {
+        "seed": 52,
+        "blob": {"size_mm": [31.0, 18.0, 22.0], "lobes": 6, "irregularity": 0.11},
+        "tissue": {"youngs_modulus_pa": 13000.0, "poisson_ratio": 0.46, "beta1": 3.0e5, "beta2": 0.45},
+        "bar": {"radius_mm": 5.5, "edge_radius_mm": 0.8, "control": "travel", "travel_mm": 6.5,
+                "schedule_times_s": [0.0, 3.5, 5.0, 8.5, 9.95], "schedule_travel_mm": [0.0, 3.5, 2.0, 6.5, 6.5],
+                "direction": [0.5, -0.8660254037844386, 0.0]},                 # 30°
+        "physics": {"friction": 0.12},
+        "protocol": {"name": "custom"},
+    }),
+    "slide_reverse_s53": ("slide", {
+        "seed": 53,
+        "blob": {"size_mm": [27.0, 17.0, 24.0], "lobes": 4, "irregularity": 0.16},
+        "tissue": {"youngs_modulus_pa": 9000.0, "poisson_ratio": 0.48, "beta1": 1.5e5, "beta2": 0.55},
+        "bar": {"radius_mm": 6.5, "edge_radius_mm": 0.3, "control": "travel", "travel_mm": 7.0,
+                "schedule_times_s": [0.0, 4.5, 5.5, 9.0, 9.95], "schedule_travel_mm": [0.0, 4.5, 3.0, 7.0, 7.0],
+                "direction": [0.6427876096865393, -0.766044443118978, 0.0]},   # 40°
+        "physics": {"friction": 0.18},
+        "protocol": {"name": "custom"},
+    }),
 }
 
 
