@@ -83,3 +83,21 @@ def test_evaluate_scores_the_choice_beside_the_best_on_the_validation_frames():
     assert ev.baselines["physics_corrected"]["fit"]["coefficients"][0][0] == pytest.approx(0.5, abs=0.05)
     # anchored on the last tracked frame, the lagging physics' motion is the truth's
     assert ev.baselines["physics_anchored"]["centroid_mean_mm"] < 0.05
+
+
+def test_a_hold_out_that_does_not_move_leaves_the_choice_with_the_physics():
+    # the drive is drawn back over the held-out frames while the sample stays: holding still is
+    # exact there, and says nothing of what comes when the drive moves it again
+    travel = np.interp(np.arange(200) * DT, [0.0, 4.0, 5.5, 9.0], [0.0, 4.0, 2.5, 7.0])
+    x_px = 40 + np.interp(np.arange(200), [0, 80, 133, 180], [0, 65, 65, 103])
+    tracked = {f: disc((x_px[f], 40)) for f in range(200)}
+    training = list(range(20, 101, 5))
+    fit, held = holdout_split(training)
+    physics = {f: disc((x_px[f] + 1, 40)) for f in fit + held}      # a tenth of a mm off, moving as the truth
+    r = rank_on_holdout(tracked, training, travel, DT, PIXEL, physics=physics)
+    assert r.order[0] == "no_motion" and r.held_motion_mm < r.resolved_mm
+    assert r.winner == "physics" and "cannot rank the predictors" in r.sentence()
+    # the same physics where the held-out frames move: the held-out best wins as before
+    moving = {f: disc((40 + 0.5 * f, 40)) for f in range(200)}
+    r = rank_on_holdout(moving, training, travel, DT, PIXEL, physics={f: moving[f] for f in fit + held})
+    assert r.informative and r.winner == r.order[0]

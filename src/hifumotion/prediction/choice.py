@@ -13,6 +13,12 @@ regression of its miss on the drive (:func:`~hifumotion.prediction.surrogates.re
 The winner is the one with the smallest held-out centroid error; a predictor whose error lies
 within the spread of the winner's margin over it (the standard deviation over the held-out
 frames of the frame-by-frame difference) is "as good" — the data do not tell them apart.
+
+A hold-out in which the tracked section hardly moves cannot rank motion predictors: holding
+still is exact there whatever comes next (a drive drawn back while friction holds the sample,
+then driven on again). When the tracked section moves less than half a pixel over the held-out
+frames (:data:`RESOLVED_PX`), the choice stays with the physics, which is fitted on every
+training frame and knows the push's whole program, and the sentence says why.
 """
 
 from __future__ import annotations
@@ -25,6 +31,9 @@ from hifumotion.errors import InputError
 
 #: the share of the training frames held out at their end
 HELD_OUT_SHARE = 0.25
+#: the least motion of the tracked section over the held-out frames (px) that can rank motion
+#: predictors: below it every anchored predictor is exact to within the images' resolution
+RESOLVED_PX = 0.5
 
 
 def holdout_split(training) -> tuple[list[int], list[int]]:
@@ -51,8 +60,11 @@ class HoldoutRanking:
     dsc
         method → the mean DSC there.
     margin_spread_mm
-        method → the spread (standard deviation over the frames) of the winner's frame-by-frame
-        margin over it (mm); 0 for the winner.
+        method → the spread (standard deviation over the frames) of the held-out best's
+        frame-by-frame margin over it (mm); 0 for the best.
+    held_motion_mm, resolved_mm
+        How far the tracked section moved over the held-out frames from the last fitted one
+        (mm), and the least motion that ranks predictors (:data:`RESOLVED_PX` pixels, mm).
     """
 
     fit_frames: list[int]
@@ -60,21 +72,34 @@ class HoldoutRanking:
     centroid_mm: dict
     dsc: dict
     margin_spread_mm: dict
+    held_motion_mm: float = float("inf")
+    resolved_mm: float = 0.0
 
     @property
     def order(self) -> list[str]:
         return sorted(self.centroid_mm, key=lambda m: self.centroid_mm[m])
 
     @property
+    def informative(self) -> bool:
+        """Whether the held-out frames moved enough to rank motion predictors."""
+        return self.held_motion_mm >= self.resolved_mm
+
+    @property
     def winner(self) -> str:
+        if not self.informative and "physics" in self.centroid_mm:
+            return "physics"
         return self.order[0]
 
     def as_good(self, method: str) -> bool:
-        """Whether ``method`` is within the spread of the winner's margin over it."""
-        return self.centroid_mm[method] - self.centroid_mm[self.winner] <= self.margin_spread_mm[method]
+        """Whether ``method`` is within the spread of the held-out best's margin over it."""
+        return self.centroid_mm[method] - self.centroid_mm[self.order[0]] <= self.margin_spread_mm[method]
 
     def sentence(self) -> str:
         """What the operator reads: which predictor the training frames favour, against which."""
+        if self.winner != self.order[0]:
+            return (f"the tracked section moved {self.held_motion_mm:.3f} mm over the held-out training frames "
+                    f"{self.held_frames[0]}–{self.held_frames[-1]}, less than the images resolve "
+                    f"({self.resolved_mm:.3f} mm): they cannot rank the predictors; predicting with the physics")
         best = self.winner
         others = [m for m in self.order if m != best]
         if not others:
@@ -91,7 +116,8 @@ class HoldoutRanking:
     def as_dict(self) -> dict:
         return {"fit_frames": [self.fit_frames[0], self.fit_frames[-1]], "held_frames": self.held_frames,
                 "centroid_mm": self.centroid_mm, "dsc": self.dsc, "margin_spread_mm": self.margin_spread_mm,
-                "order": self.order, "winner": self.winner, "sentence": self.sentence()}
+                "order": self.order, "winner": self.winner, "held_motion_mm": self.held_motion_mm,
+                "resolved_mm": self.resolved_mm, "informative": self.informative, "sentence": self.sentence()}
 
 
 def _label(method: str) -> str:
@@ -138,6 +164,7 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
         is not ranked).
     """
     from hifumotion.metrics import centroid_distance, dice
+    from hifumotion.prediction.surrogates import mask_centroids_mm
 
     fit, held = holdout_split(training)
     held = [f for f in held if f in tracked and np.asarray(tracked[f]).any()]
@@ -161,9 +188,13 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
         e = [centroid_distance(m[f], tracked[f], pixel_mm) if m[f].any() else np.inf for f in held]
         errors[name] = np.array(e, float)
         dsc[name] = float(np.mean([dice(m[f], tracked[f]) for f in held]))
-    winner = min(errors, key=lambda n: float(np.mean(errors[n])))
-    spread = {n: 0.0 if n == winner else float(np.std(e - errors[winner], ddof=1)) for n, e in errors.items()}
-    return HoldoutRanking(list(fit), held, {n: float(np.mean(e)) for n, e in errors.items()}, dsc, spread)
+    best = min(errors, key=lambda n: float(np.mean(errors[n])))
+    spread = {n: 0.0 if n == best else float(np.std(e - errors[best], ddof=1)) for n, e in errors.items()}
+    anchor = max(f for f in fit if f in tracked and np.asarray(tracked[f]).any())
+    frames, c = mask_centroids_mm({f: tracked[f] for f in [anchor, *held]}, pixel_mm)
+    moved = float(np.linalg.norm(c - c[list(frames).index(anchor)], axis=1).max())
+    return HoldoutRanking(list(fit), held, {n: float(np.mean(e)) for n, e in errors.items()}, dsc, spread,
+                          moved, RESOLVED_PX * pixel_mm)
 
 
 def holdout_physics(observation, settings, training, log_path=None, progress=None) -> dict[int, np.ndarray]:
@@ -204,4 +235,4 @@ def write_chosen(folder, method: str, masks: dict[int, np.ndarray], frame_interv
     write_text(folder / "sections.csv", "\n".join(rows) + "\n")
 
 
-__all__ = ["HELD_OUT_SHARE", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks", "rank_on_holdout", "write_chosen"]
+__all__ = ["HELD_OUT_SHARE", "RESOLVED_PX", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks", "rank_on_holdout", "write_chosen"]
