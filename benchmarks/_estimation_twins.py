@@ -104,10 +104,15 @@ LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
         "physics": {"friction": 0.12},
         "protocol": {"peak_travel_mm": 6.0, "angle_deg": 38.0, "ramp_s": 7.75},
     }),
-    # a drive that reverses: in 4 mm over 4 s, drawn back to 2.5 mm by 5.5 s, then on to 7 mm by 9 s.
-    # Friction holds the sample where the bar left it; the bar must come back to it before it
-    # moves again — a motion that is not a linear image of the travel, where a model of contact
-    # and friction can earn its cost over a regression on the drive (set before any score)
+}
+
+#: a drive that reverses (travel control, finite-strain truth): in, drawn back, then on again.
+#: Friction holds the sample where the bar left it, and the bar must come back to it before it
+#: moves again — a motion that is not a linear image of the travel, where a model of contact and
+#: friction can earn its cost over a regression on the drive (each set before any score; ~17 min
+#: each to make; docs/decisions.md, "A drive that reverses")
+REVERSAL_CASES: dict[str, tuple[str, dict]] = {
+    # in 4 mm over 4 s, drawn back to 2.5 mm by 5.5 s, then on to 7 mm by 9 s
     "slide_reverse_s51": ("slide", {
         "seed": 51,
         "blob": {"size_mm": [28.0, 17.0, 23.0], "lobes": 5, "irregularity": 0.13},
@@ -141,12 +146,15 @@ LARGE_MOTION_CASES: dict[str, tuple[str, dict]] = {
     }),
 }
 
+#: every case by name
+ALL_CASES = {**CASES, **LARGE_MOTION_CASES, **REVERSAL_CASES}
+
 
 def case_config(name: str):
-    """The :class:`~hifumotion.experiment.config.TwinConfig` of case ``name`` (either table)."""
+    """The :class:`~hifumotion.experiment.config.TwinConfig` of case ``name`` (any table)."""
     from hifumotion.experiment.config import twin_config
 
-    preset, overrides = {**CASES, **LARGE_MOTION_CASES}[name]
+    preset, overrides = ALL_CASES[name]
     return twin_config(preset, overrides)
 
 
