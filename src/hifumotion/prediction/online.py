@@ -92,35 +92,29 @@ class OnlineResult:
         truth = np.asarray(truth_mm, float)
         return truth - truth[0] + self.tracked_mm[0]
 
+    def _misses_mm(self, aims: np.ndarray, k: int, truth_mm: np.ndarray | None) -> np.ndarray:
+        """``(len(frames),)`` |aim made at t − actual(t + k)| (NaN beyond the cine)."""
+        actual = self._actual(truth_mm)
+        target = self.frames + k
+        out = np.full(len(self.frames), np.nan)
+        ok = target < len(actual)
+        out[ok] = np.linalg.norm(aims[ok] - actual[target[ok]], axis=1)
+        return out
+
     def errors_mm(self, k: int, truth_mm: np.ndarray | None = None) -> np.ndarray:
         """``(len(frames),)`` |predicted − actual| at t + k (NaN beyond the cine): actual the
         tracked centroid, or the true one's motion (``truth_mm`` ``(T, 2)``, :meth:`_actual`)."""
-        actual = self._actual(truth_mm)
-        target = self.frames + k
-        out = np.full(len(self.frames), np.nan)
-        ok = target < len(actual)
-        out[ok] = np.linalg.norm(self.predicted_mm[k][ok] - actual[target[ok]], axis=1)
-        return out
+        return self._misses_mm(self.predicted_mm[k], k, truth_mm)
 
     def hold_errors_mm(self, k: int, truth_mm: np.ndarray | None = None) -> np.ndarray:
         """The same for holding the last tracked frame: |tracked(t) − actual(t + k)|."""
-        actual = self._actual(truth_mm)
-        target = self.frames + k
-        out = np.full(len(self.frames), np.nan)
-        ok = target < len(actual)
-        out[ok] = np.linalg.norm(self.tracked_mm[self.frames[ok]] - actual[target[ok]], axis=1)
-        return out
+        return self._misses_mm(self.tracked_mm[self.frames], k, truth_mm)
 
     def surrogate_errors_mm(self, k: int, truth_mm: np.ndarray | None = None) -> np.ndarray:
         """The same for the online surrogate's aim: |surrogate(t + k) − actual(t + k)|."""
-        actual = self._actual(truth_mm)
-        target = self.frames + k
-        out = np.full(len(self.frames), np.nan)
         if k not in self.surrogate_mm:
-            return out
-        ok = target < len(actual)
-        out[ok] = np.linalg.norm(self.surrogate_mm[k][ok] - actual[target[ok]], axis=1)
-        return out
+            return np.full(len(self.frames), np.nan)
+        return self._misses_mm(self.surrogate_mm[k], k, truth_mm)
 
     def summary(self) -> dict:
         """Latency (median, 99th percentile, tracking included; the frames whose aims came after
