@@ -281,9 +281,8 @@ class OnlineDriveRegression:
         scale = max(float(np.abs(u).max()), 1e-12)
         # a weak prior on θ (the program's scale): the first frames' solves stay defined
         self.members = [_Member(lag, self.forgetting, 2 if lag is None else 3, 1e-6 * scale ** 2) for lag in lags]
-        self.program = u
         self.phi = [_features(u, self.dt, m.lag_s) for m in self.members]
-        self.pending: dict[int, list] = {}        # target frame -> [(horizon, member index, aim)]
+        self.pending: dict[int, list] = {}        # target frame -> [(horizon, every member's aim)]
         self.scores: dict[int, np.ndarray] = {}   # horizon -> forgetting-weighted squared miss per member
         self.last_frame = -1
         self.seen: tuple[int, np.ndarray] | None = None
