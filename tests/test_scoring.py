@@ -72,3 +72,21 @@ def test_whole_short_series_scores_on_the_scaled_protocol():
     summary = score_masks(truth, truth, 0.5).summary()
     assert summary["training"]["frames"] == list(range(4, 21, 2))
     assert summary["validation"]["frames"] == list(range(22, 39, 2))
+
+
+def test_the_overlays_are_drawn_as_the_frames_files_show_them(tmp_path):
+    """Row 0 at the top, as any image viewer shows a frame: a bright block in the first rows of
+    the frame is in the upper half of its panel."""
+    import imageio.v3 as iio
+
+    from hifumotion.scoring import overlay_figure
+
+    image = np.zeros((60, 80))
+    image[3:15, 20:60] = 1.0
+    mask = image > 0.5
+    png = iio.imread(overlay_figure({0: image}, {0: mask}, {0: mask}, [0], tmp_path / "o.png", columns=1))
+    grey = png[..., :3].mean(axis=2)
+    rows, cols = np.nonzero(grey < 40)                  # the panel: the frame's black background
+    panel = grey[rows.min():rows.max() + 1, cols.min():cols.max() + 1]
+    half = panel.shape[0] // 2
+    assert (panel[:half] > 200).sum() > 10 * max(1, (panel[half:] > 200).sum())

@@ -95,7 +95,8 @@ def score_masks(predicted: dict[int, np.ndarray], truth: dict[int, np.ndarray], 
 
 def overlay_figure(images: dict[int, np.ndarray], truth: dict[int, np.ndarray], predicted: dict[int, np.ndarray],
                    frames, path: str | Path, columns: int = 5) -> Path:
-    """The paper's Fig. 4: frames with the true (green) and predicted (red) contours, as a PNG."""
+    """The paper's Fig. 4: frames with the true (green) and predicted (red) contours, as a PNG,
+    drawn as the frames' files show them (row 0 at the top)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -111,7 +112,7 @@ def overlay_figure(images: dict[int, np.ndarray], truth: dict[int, np.ndarray], 
     for ax in axes.ravel():
         ax.axis("off")
     for ax, f in zip(axes.ravel(), frames):
-        ax.imshow(images[f], cmap="gray", origin="lower")
+        ax.imshow(images[f], cmap="gray", origin="upper")
         ax.contour(truth[f], [0.5], colors="lime", linewidths=1.0)
         ax.contour(predicted[f], [0.5], colors="red", linewidths=1.0)
         ax.set_title(f"frame {f}  DSC {dice(predicted[f], truth[f]):.3f}", fontsize=9)

@@ -73,7 +73,8 @@ def material_points_csv(points: dict[str, np.ndarray], spacing_mm) -> str:
 def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) -> Path:
     """Frame 0 with the last frame's displacement of its tissue (arrows, true length, from
     where the material was) and both contours; the last frame with its contour; the last
-    frame's axial strain ε_yy on frame 0's grid."""
+    frame's axial strain ε_yy on frame 0's grid. Drawn as the frames are stored and shown by any
+    image viewer: row 0 at the top."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -85,10 +86,11 @@ def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) ->
     last = series.n_frames - 1
     row, col = series.spacing_mm
     h, w = frames.shape[1:]
-    extent = (-0.5 * col, (w - 0.5) * col, -0.5 * row, (h - 0.5) * row)
+    # row 0 at the top, as the frames' own files show it (y, the row direction, points down)
+    extent = (-0.5 * col, (w - 0.5) * col, (h - 0.5) * row, -0.5 * row)
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.8))
     for a, t, title in ((ax[0], 0, f"frame 0, displacement to frame {last}"), (ax[1], last, f"frame {last}")):
-        a.imshow(frames[t], cmap="gray", vmin=0, vmax=1, origin="lower", extent=extent)
+        a.imshow(frames[t], cmap="gray", vmin=0, vmax=1, origin="upper", extent=extent)
         for k, colour in ((0, "yellow"), (last, "orange")):
             if k == t or t == 0:
                 p = result.contours[k].points_mm
@@ -102,7 +104,7 @@ def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) ->
                  color="cyan", angles="xy", scale_units="xy", scale=1.0, width=0.004)
     strain = np.where(result.masks[0], series.strain(last)[..., 1], np.nan)
     lim = np.nanpercentile(np.abs(strain), 98) if np.isfinite(strain).any() else 1.0
-    im = ax[2].imshow(strain, cmap="RdBu_r", vmin=-lim, vmax=lim, origin="lower", extent=extent)
+    im = ax[2].imshow(strain, cmap="RdBu_r", vmin=-lim, vmax=lim, origin="upper", extent=extent)
     ax[2].set_title(f"axial strain ε_yy, frame {last}")
     fig.colorbar(im, ax=ax[2], fraction=0.046)
     for a in ax:
