@@ -164,7 +164,7 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
         is not ranked).
     """
     from hifumotion.metrics import centroid_distance, dice
-    from hifumotion.prediction.surrogates import mask_centroids_mm
+    from hifumotion.prediction.surrogates import anchored_to_last, mask_centroids_mm, residual_corrected
 
     fit, held = holdout_split(training)
     held = [f for f in held if f in tracked and np.asarray(tracked[f]).any()]
@@ -174,8 +174,6 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
     if physics is not None and any(f not in physics for f in held):
         raise InputError(f"the physics' masks must cover the held-out frames {held[0]}–{held[-1]}", "physics")
     if physics is not None:
-        from hifumotion.prediction.surrogates import anchored_to_last, residual_corrected
-
         seen = {f: tracked[f] for f in sorted({0, *fit}) if f in tracked}
         masks = {"physics": physics, **masks}
         if max(seen) in physics:
@@ -235,4 +233,5 @@ def write_chosen(folder, method: str, masks: dict[int, np.ndarray], frame_interv
     write_text(folder / "sections.csv", "\n".join(rows) + "\n")
 
 
-__all__ = ["HELD_OUT_SHARE", "RESOLVED_PX", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks", "rank_on_holdout", "write_chosen"]
+__all__ = ["HELD_OUT_SHARE", "RESOLVED_PX", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks",
+           "rank_on_holdout", "write_chosen"]
