@@ -267,6 +267,7 @@ CASES = [
     (["track", "observed_field", "-o", "out"], "setup.json"),
     (["calibrate", "observed_field", "--objective", "shape", "-o", "out"], "--objective"),
     (["calibrate", "observed_field", "--tracking", "magic", "-o", "out"], "--tracking"),
+    (["calibrate", "observed_field", "--force", "1e-300", "-o", "out"], "--force"),
     (["segment", "ph/images/phantom.png", "--init", "missing.json", "-o", "out"], "missing.json"),
     (["segment", "ph/images/phantom.png", "--init", "short_row.csv", "-o", "out"], "line 3"),
     (["segment", "ph/images/phantom.png", "--init", "nan_point.csv", "-o", "out"], "finite"),

@@ -22,7 +22,7 @@ def calibrate(
     contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of tracking."),
     objective: str = typer.Option("auto", "--objective", help="auto (default: contour+displacement where speckle tracking observed the motion, else contour), contour (the paper's S_t) or contour+displacement (also the speckle-tracked displacement of the contour points)."),
     tracking: str = typer.Option("speckle", "--tracking", help="speckle (frame 0's contour carried by speckle tracking, default) or glcv (re-segment every frame, as the paper)."),
-    force: float = typer.Option(paper.FORCE_N, "--force", callback=positive, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
+    force: float = typer.Option(paper.FORCE_N, "--force", callback=positive, min=1e-6, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
     particles: Optional[int] = typer.Option(None, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (default 4,399, the paper's; short for --set model.tissue_particles=N)."),
     search_particles: int = typer.Option(1000, "--search-particles", min=100, max=1_000_000, help="Tissue particles of the coarser model the search runs on."),
     max_evaluations: int = typer.Option(8, "--max-evaluations", min=1, help="Least squares: residual evaluations (each with a p-run Jacobian)."),
