@@ -23,6 +23,7 @@ HERE = Path(__file__).resolve().parent
 #: Benchmark → the arguments of a quick run (the full run uses each script's defaults).
 QUICK = {
     "bench_tracking": ["--frames", "60"],
+    "bench_real_tracking": ["--quick"],
     "bench_observation": ["--quick"],
     "bench_bmode": ["--phantoms", "3", "--frames", "50"],
     "bench_particles": ["--steps", "150", "--json"],

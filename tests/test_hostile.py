@@ -123,6 +123,18 @@ def build_scratch(root: Path) -> Path:
     # contour CSVs: a row short of a field, a coordinate that is not a finite number
     (root / "short_row.csv").write_text("frame,x_px,y_px\n0,10,10\n0,20\n0,20,20\n")
     (root / "nan_point.csv").write_text("frame,x_px,y_px\n0,10,10\n0,20,nan\n0,20,20\n")
+    # points to follow: off the image, not numbers, named twice, a row short, no rows, mm without a size
+    (root / "points_ok.csv").write_text("name,x_px,y_px\na,10,12\nb,20.5,30\n")
+    (root / "points_outside.csv").write_text("x_px,y_px\n10,12\n400,3\n")
+    (root / "points_negative.csv").write_text("x_px,y_px\n-1,12\n")
+    (root / "points_nan.csv").write_text("x_px,y_px\nnan,12\n")
+    (root / "points_word.csv").write_text("x_px,y_px\nten,12\n")
+    (root / "points_twice.csv").write_text("name,x_px,y_px\nhyoid,1,2\nhyoid,3,4\n")
+    (root / "points_short.csv").write_text("name,x_px,y_px\na,1,2\nb,3\n")
+    (root / "points_header.csv").write_text("name,x_px,y_px\n")
+    (root / "points_columns.csv").write_text("name,col,row\na,1,2\n")
+    (root / "points_mm.csv").write_text("x_mm,y_mm\n1,2\n")
+    (root / "points_many.csv").write_text("x_px,y_px\n" + "1,1\n" * 10_001)
     (root / "deep_resume.jsonl").write_text(deep + "\n")
     (root / "observed_deep").mkdir()
     (root / "observed_deep" / "setup.json").write_text('{"a": ' + deep + "}")
@@ -265,6 +277,11 @@ CASES = [
     (["track", "good.nii.gz", "--init", "mask40.png", "--bar", "small_mask.png", "-o", "out"], "small_mask.png"),
     (["track", "good.nii.gz", "--init", "mask40.png", "--setup", "observed_bad/setup.json", "-o", "out"], "setup.json"),
     (["track", "observed_field", "-o", "out"], "setup.json"),
+    # hifumotion track --points: the points file's faults, each named with the file
+    *[(["track", "good.nii.gz", "--points", f"points_{kind}.csv", "-o", "out"], f"points_{kind}.csv")
+      for kind in ("outside", "negative", "nan", "word", "twice", "short", "header", "columns", "many")],
+    (["track", "image.png", "--points", "points_ok.csv", "-o", "out"], "frame"),
+    (["track", "frame_masks", "--points", "points_mm.csv", "-o", "out"], "points_mm.csv"),
     (["calibrate", "observed_field", "--objective", "shape", "-o", "out"], "--objective"),
     (["calibrate", "observed_field", "--tracking", "magic", "-o", "out"], "--tracking"),
     (["calibrate", "observed_field", "--force", "1e-300", "-o", "out"], "--force"),
@@ -435,6 +452,8 @@ PATH_SLOTS = [
     ["track", "good.nii.gz", "--init", "mask40.png", "--setup", "{}", "-o", "out"],
     ["track", "good.nii.gz", "--init", "mask40.png", "--exclude", "{}", "-o", "out"],
     ["track", "good.nii.gz", "--init", "mask40.png", "--bar", "{}", "-o", "out"],
+    ["track", "good.nii.gz", "--points", "{}", "-o", "out"],
+    ["track", "good.nii.gz", "--init", "mask40.png", "--points", "{}", "-o", "out"],
     ["simulate", "{}", "-o", "out"],
     ["experiment", "--config", "{}", "-o", "out"],
     ["calibrate", "{}", "-o", "out"],
@@ -460,6 +479,7 @@ POSITIVE_OPTIONS = [
     (["info", "image.png", "--frame-interval", "{}"], "--frame-interval"),
     (["track", "good.nii.gz", "--init", "mask40.png", "-o", "out", "--frame-interval", "{}"], "--frame-interval"),
     (["track", "good.nii.gz", "--init", "mask40.png", "-o", "out", "--spacing", "{}"], "--spacing"),
+    (["track", "good.nii.gz", "--points", "points_ok.csv", "-o", "out", "--spacing", "{}"], "--spacing"),
     (["score", "frame_masks", "frame_masks", "--spacing", "{}"], "--spacing"),
 ]
 CASES += [([a.format(value) for a in argv], word) for argv, word in POSITIVE_OPTIONS

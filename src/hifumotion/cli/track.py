@@ -59,9 +59,11 @@ def track(
     estimator: str = typer.Option("farneback", "--estimator", help="Optical flow: farneback (default), dis, ilk or tvl1."),
     spacing: Optional[str] = typer.Option(None, "--spacing", help="Pixel size in mm: '0.2' or 'row,col'. Overrides the file."),
     frame_interval: Optional[float] = typer.Option(None, "--frame-interval", callback=positive, help="Seconds between frames. Overrides the file."),
+    points: Optional[Path] = typer.Option(None, "--points", help="CSV of points to follow from frame 0 (columns name, x_px, y_px or x_mm, y_mm): landmarks, a contour's vertices, an open curve. Without --init only the points are followed."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
-    """Follow the target's material through a cine: frame 0 segmented, its contour carried by speckle tracking."""
+    """Follow the target's material through a cine: frame 0 segmented, its contour carried by speckle
+    tracking; and/or given points (--points) followed from frame 0."""
     from hifumotion.cli.segment import load_init
     from hifumotion.io import output_folder, read_sequence
     from hifumotion.run_info import RunRecord
@@ -91,12 +93,16 @@ def track(
         seq = ImageSequence.from_array(observed.frames, spacing_mm=parse_spacing(spacing) or observed.pixel_mm,
                                        frame_interval_s=frame_interval or observed.frame_interval_s,
                                        source=str(cine), value_range=(0.0, 255.0))
-    elif init is None:
-        raise InputError("give frame 0's initial contour with --init (or track an observed/ folder)", "--init")
+    elif init is None and points is None:
+        raise InputError("give frame 0's initial contour with --init, points with --points, "
+                         "or track an observed/ folder", "--init")
     else:
         seq = read_sequence(cine, parse_spacing(spacing), frame_interval)
     if seq.n_frames < 2:
         raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
+    if init is None:
+        _track_points_only(seq, source, points, output, overwrite)
+        return
     if not seq.spacing_known:
         # the track's displacements and contours are in mm: a pixel size guessed would scale them all
         raise InputError("carries no pixel size; give it with --spacing MM (or 'ROW,COL')", cine)
@@ -108,16 +114,24 @@ def track(
                                         "bar": None if bar is None else str(bar), "method": method,
                                         "estimator": estimator, "boundary_offset_mm": boundary_offset,
                                         "spacing_mm": list(seq.spacing_mm), "frame_interval_s": seq.frame_interval_s})
-    with output_folder(output, overwrite, inputs=(source, init, setup, exclude, bar)) as out:
+    given = _read_points(points, seq) if points is not None else None
+    if given is not None:
+        record.config["points"] = str(points)
+    with output_folder(output, overwrite, inputs=(source, init, setup, exclude, bar, points)) as out:
         with record.stage("speckle tracking"):
             series = displacement(seq.frames, seq.spacing_mm, estimator=estimator, progress=True,
                                   **tracker_solids(solids))
         with record.stage("contours"):
             result = follow(seq.frames, start, seq.spacing_mm, solids=solids, boundary_offset_mm=boundary_offset,
                             method=method, series=series)
+        point_summary = None
+        if given is not None:
+            with record.stage("points"):
+                point_summary = _follow_and_write_points(out, seq, given)
         with record.stage("write"):
             summary = write_tracking(out, seq.frames, result, seq.frame_interval_s,
-                                     {"source": str(source), "method": method})
+                                     {"source": str(source), "method": method,
+                                      **({"points": point_summary} if point_summary else {})})
         record.extra["frames"] = seq.n_frames
         record.extra["ms_per_frame_mean"] = summary["ms_per_frame_mean"]
         record.write(out)
@@ -125,3 +139,50 @@ def track(
     log.info("speckle tracking: %d frames, %.1f ms per frame", seq.n_frames, summary["ms_per_frame_mean"] or 0.0)
     console.print(f"tracked {seq.n_frames} frames: the target's centroid moved up to {max(shift):.2f} mm; "
                   f"results in {output.resolve()}", highlight=False)
+
+
+def _read_points(path: Path, seq):
+    from hifumotion.io.points import read_points_csv
+    from hifumotion.speckle.points import check_points
+
+    xy, names = read_points_csv(path, seq.spacing_mm if seq.spacing_known else None)
+    try:
+        check_points(xy, seq.shape)
+    except InputError as exc:
+        raise InputError(exc.reason, path) from None
+    return xy, names
+
+
+def _follow_and_write_points(out: Path, seq, given) -> dict:
+    """Follow the points through ``seq`` and write ``points.csv`` and ``points.png``; the summary."""
+    from hifumotion.speckle.output import write_point_track
+    from hifumotion.speckle.points import track_points
+
+    xy, names = given
+    result = track_points(seq.frames, xy, names=names, progress=True)
+    return write_point_track(out, seq.frames, result, seq.spacing_mm if seq.spacing_known else None,
+                             seq.frame_interval_s)
+
+
+def _track_points_only(seq, source: Path, points: Path, output: Path, overwrite: bool) -> None:
+    """``track --points`` without a region: the points' trajectories, in px (and mm where the
+    cine carries a pixel size)."""
+    from hifumotion.io import output_folder, write_json
+    from hifumotion.run_info import RunRecord
+
+    given = _read_points(points, seq)
+    record = RunRecord("track", config={"source": str(source), "points": str(points),
+                                        "spacing_mm": list(seq.spacing_mm) if seq.spacing_known else None,
+                                        "frame_interval_s": seq.frame_interval_s})
+    with output_folder(output, overwrite, inputs=(source, points)) as out:
+        with record.stage("points"):
+            summary = _follow_and_write_points(out, seq, given)
+        write_json(out / "tracking.json", {"source": str(source), "frames": seq.n_frames, "points": summary})
+        record.extra["frames"] = seq.n_frames
+        record.extra["ms_per_frame_mean"] = summary["ms_per_frame_mean"]
+        record.write(out)
+    log.info("followed %d points over %d frames, %.2f ms per frame", len(given[1]), seq.n_frames,
+             summary["ms_per_frame_mean"] or 0.0)
+    unit = "mm" if seq.spacing_known else "px"
+    console.print(f"followed {len(given[1])} points over {seq.n_frames} frames: they moved up to "
+                  f"{summary['largest_shift_' + unit]:.2f} {unit}; results in {output.resolve()}", highlight=False)

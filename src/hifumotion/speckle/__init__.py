@@ -9,6 +9,7 @@
 from hifumotion.speckle.displacement import DisplacementSeries, SpeckleTracker, displacement, local_ncc, sample_field
 from hifumotion.speckle._speckle_size import speckle_fwhm_px
 from hifumotion.speckle.follow import FollowResult, carry_contour, follow, segment_target
+from hifumotion.speckle.points import PointTrack, PointTracker, track_points
 
-__all__ = ["DisplacementSeries", "FollowResult", "SpeckleTracker", "carry_contour", "displacement", "follow",
+__all__ = ["DisplacementSeries", "FollowResult", "PointTrack", "PointTracker", "track_points", "SpeckleTracker", "carry_contour", "displacement", "follow",
            "local_ncc", "sample_field", "segment_target", "speckle_fwhm_px"]

@@ -11,6 +11,11 @@ Layout (lengths in mm, times in s)::
     material_points.csv         frame, point, kind (contour/interior), x_mm, y_mm, dx_mm, dy_mm, quality
     tracking.json               speckle size, bar bloom, the bar's tracked push, timings
     motion.png                  frame 0 and the last frame with the contours; displacement quiver; strain
+
+Given points (``track --points``)::
+
+    points.csv                  frame, time_s, point, name, x_px, y_px, x_mm, y_mm, disagreement_px
+    points.png                  frame 0 and the last frame with every point's trajectory
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import numpy as np
 
 from hifumotion.speckle.displacement import DisplacementSeries
 from hifumotion.speckle.follow import FollowResult
+from hifumotion.speckle.points import PointTrack
 
 
 def interior_points_px(mask: np.ndarray, step_px: float) -> np.ndarray:
@@ -156,4 +162,54 @@ def write_tracking(folder: str | Path, frames: np.ndarray, result: FollowResult,
     return summary
 
 
-__all__ = ["write_tracking", "material_points", "material_points_csv", "interior_points_px", "motion_figure"]
+def points_figure(frames: np.ndarray, track: PointTrack, path: str | Path) -> Path:
+    """Frame 0 and the last frame, each point's trajectory drawn over both (px, row 0 at the top)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hifumotion.io.files import atomic_path
+
+    last = track.n_frames - 1
+    pos = track.positions_px
+    fig, ax = plt.subplots(1, 2, figsize=(12, 5))
+    for a, t in ((ax[0], 0), (ax[1], last)):
+        a.imshow(frames[t], cmap="gray", origin="upper")
+        for i in range(pos.shape[1]):
+            a.plot(pos[:, i, 0], pos[:, i, 1], lw=0.8, color="cyan")
+        a.scatter(pos[t, :, 0], pos[t, :, 1], s=12, color="yellow" if t == 0 else "orange", zorder=3)
+        a.set_title(f"frame {t}" + (", where the points start" if t == 0 else ", where they are"))
+        a.set_xlabel("x (px)")
+        a.set_ylabel("y (px)")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def write_point_track(folder: str | Path, frames: np.ndarray, track: PointTrack, spacing_mm=None,
+                      frame_interval_s: float | None = None) -> dict:
+    """``points.csv`` and ``points.png`` into ``folder`` (module docstring); returns their summary
+    (for ``tracking.json``): the points, the largest shift of any from frame 0 (px, and mm with a
+    pixel size), the estimators' largest disagreement and the time a frame took."""
+    from hifumotion.io.files import write_text
+    from hifumotion.io.points import point_track_csv
+
+    folder = Path(folder)
+    write_text(folder / "points.csv", point_track_csv(track.positions_px, track.names, track.disagreement_px,
+                                                      spacing_mm, frame_interval_s))
+    points_figure(frames, track, folder / "points.png")
+    shift_px = np.linalg.norm(track.positions_px - track.positions_px[:1], axis=2)
+    summary = {"names": list(track.names), "largest_shift_px": round(float(shift_px.max()), 3),
+               "largest_disagreement_px": round(float(track.disagreement_px.max()), 3),
+               "ms_per_frame_mean": round(1000 * float(np.mean(track.seconds_per_frame[1:])), 3)
+               if track.n_frames > 1 else None}
+    if spacing_mm is not None:
+        summary["largest_shift_mm"] = round(float(np.linalg.norm(track.positions_mm(spacing_mm)
+                                                                 - track.positions_mm(spacing_mm)[:1], axis=2).max()), 4)
+    return summary
+
+
+__all__ = ["points_figure", "write_point_track", "write_tracking", "material_points", "material_points_csv", "interior_points_px", "motion_figure"]
