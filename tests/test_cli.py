@@ -173,16 +173,43 @@ def test_track_follows_the_twins_target_and_writes_its_fields(small_twin, tmp_pa
 
     folder, result = small_twin
     out = tmp_path / "tr"
-    proc = run("track", str(folder / "observed"), "-o", str(out))
+    centre = np.argwhere(read_frame_masks(folder / "truth")[0]).mean(axis=0)     # (row, col) px
+    given = tmp_path / "points.csv"
+    given.write_text(f"name,x_px,y_px\ncentre,{centre[1]:.2f},{centre[0]:.2f}\n")
+    proc = run("track", str(folder / "observed"), "--fields", "--points", str(given), "-o", str(out))
     assert proc.returncode == 0, proc.stderr
     for name in ("masks.nii.gz", "contours.csv", "displacement_x_mm.nii.gz", "displacement_y_mm.nii.gz",
-                 "quality.nii.gz", "material_points.csv", "tracking.json", "motion.png", "run_info.json"):
+                 "quality.nii.gz", "material_points.csv", "material_points.npz", "tracking.json", "motion.png",
+                 "run_info.json"):
         assert (out / name).is_file(), name
     masks = sitk.GetArrayFromImage(sitk.ReadImage(str(out / "masks.nii.gz"))).reshape(result.frames.shape) > 0
     truth = read_frame_masks(folder / "truth")
     assert min(dice(masks[f], truth[f]) for f in truth) > 0.9
     summary = json.loads((out / "tracking.json").read_text())
     assert summary["frames"] == len(result.frames) and summary["material_points"]["interior"] > 10
+    assert not summary["frame0_segmentation"]["given_region_kept"]
+    # the given point, at the target's centre, is followed beside the region, in px and mm
+    assert summary["points"]["names"] == ["centre"] and (out / "points.csv").is_file()
+    assert summary["points"]["largest_shift_mm"] > 0
+    # the field is cut to the target's neighbourhood and placed where it was cut from: the pixel
+    # under frame 0's target centre is inside the box, and the target's material moved there
+    box = summary["fields"]
+    field = sitk.ReadImage(str(out / "displacement_y_mm.nii.gz"))
+    row, col = summary["spacing_mm"]
+    assert np.allclose(field.GetOrigin()[:2], (box["origin_px"][0] * col, box["origin_px"][1] * row))
+    uy = sitk.GetArrayFromImage(field).reshape(len(result.frames), *box["shape_px"])
+    quality = sitk.GetArrayFromImage(sitk.ReadImage(str(out / "quality.nii.gz"))).reshape(uy.shape)
+    cy, cx = np.argwhere(masks[0]).mean(axis=0).round().astype(int)
+    at = (cy - box["origin_px"][1], cx - box["origin_px"][0])
+    # an estimate at the target's centre; none in the box's corner, beyond the margin
+    assert quality[-1][at] > 0 and uy[-1][at] != 0 and quality[-1, 0, 0] == 0 and uy[-1, 0, 0] == 0
+    points = np.load(out / "material_points.npz")
+    n = summary["material_points"]["contour"] + summary["material_points"]["interior"]
+    assert points["displacement_mm"].shape == (len(result.frames), n, 2) and points["rest_mm"].shape == (n, 2)
+    # the contour's material moved as the truth's section did: the tracked centroid shift of
+    # the last frame is that of the true masks within a pixel
+    true_shift = np.linalg.norm(np.argwhere(truth[max(truth)]).mean(0) - np.argwhere(truth[min(truth)]).mean(0)) * row
+    assert abs(summary["centroid_shift_mm"][max(truth)] - true_shift) < 2 * row
     # the bar's tracked push goes the way the bar points (down)
     assert summary["bar_shift_mm"][-1][1] < 0
     # PNG frames carry no pixel size: tracking them is refused, naming the option, not done in 1 mm pixels

@@ -386,3 +386,30 @@ def test_tissue_compressed_by_a_bar_is_tracked_down_to_its_face(scatterers):
         assert np.sqrt(np.mean(error ** 2)) < 0.6, keyframe_quality
         now_row = rows[under] + series.displacement_mm[-1][..., 1][under] / PX
         assert now_row.max() <= face - push - 0.5 + 0.25          # none of it inside the bar
+
+
+def test_a_segmentation_that_leaks_out_of_the_given_region_is_not_followed():
+    """Frame 0's level set started inside a large bright band (the given region a disc of it)
+    grows over the band: most of it lies far outside what the user drew, so the given region is
+    kept and the result says so; started from a rough contour of a disc that is the target, the
+    segmentation is kept."""
+    from conftest import disc
+
+    from hifumotion.speckle.follow import REGION_LEAK_FRACTION, segment_target
+
+    rng = np.random.default_rng(3)
+    shape = (120, 160)
+    noise = 0.05 * rng.standard_normal(shape)
+    band = np.zeros(shape, bool)
+    band[40:80, 10:150] = True
+    given = disc(shape, 40, 60, 12)
+    image = np.clip(0.2 + 0.5 * band + noise, 0, 1)
+    got = segment_target(image, given, 0.2)
+    assert got.given_region_kept and got.outside_fraction > REGION_LEAK_FRACTION
+    np.testing.assert_array_equal(got.mask, given)
+    target = disc(shape, 80, 60, 20)
+    image = np.clip(0.2 + 0.5 * target + noise, 0, 1)
+    rough = disc(shape, 82, 61, 18)
+    got = segment_target(image, rough, 0.2)
+    assert not got.given_region_kept
+    assert (got.mask & target).sum() / (got.mask | target).sum() > 0.9

@@ -60,6 +60,7 @@ def track(
     spacing: Optional[str] = typer.Option(None, "--spacing", help="Pixel size in mm: '0.2' or 'row,col'. Overrides the file."),
     frame_interval: Optional[float] = typer.Option(None, "--frame-interval", callback=positive, help="Seconds between frames. Overrides the file."),
     points: Optional[Path] = typer.Option(None, "--points", help="CSV of points to follow from frame 0 (columns name, x_px, y_px or x_mm, y_mm): landmarks, a contour's vertices, an open curve. Without --init only the points are followed."),
+    fields: bool = typer.Option(False, "--fields", help="Also write the dense displacement and its quality around the target (NIfTI, for 3D Slicer and ParaView)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Follow the target's material through a cine: frame 0 segmented, its contour carried by speckle
@@ -112,7 +113,7 @@ def track(
     record = RunRecord("track", config={"source": str(source), "init": str(init), "setup": None if setup is None else str(setup),
                                         "exclude": None if exclude is None else str(exclude),
                                         "bar": None if bar is None else str(bar), "method": method,
-                                        "estimator": estimator, "boundary_offset_mm": boundary_offset,
+                                        "estimator": estimator, "boundary_offset_mm": boundary_offset, "fields": fields,
                                         "spacing_mm": list(seq.spacing_mm), "frame_interval_s": seq.frame_interval_s})
     given = _read_points(points, seq) if points is not None else None
     if given is not None:
@@ -131,10 +132,16 @@ def track(
         with record.stage("write"):
             summary = write_tracking(out, seq.frames, result, seq.frame_interval_s,
                                      {"source": str(source), "method": method,
-                                      **({"points": point_summary} if point_summary else {})})
+                                      **({"points": point_summary} if point_summary else {})}, fields=fields)
         record.extra["frames"] = seq.n_frames
         record.extra["ms_per_frame_mean"] = summary["ms_per_frame_mean"]
         record.write(out)
+    if result.first is not None and result.first.given_region_kept:
+        from hifumotion.speckle.follow import REGION_MARGIN
+
+        log.warning("frame 0's segmentation left the given region (%.0f %% of it lay more than %.2g of the "
+                    "region's radius outside): the given region was followed instead",
+                    100 * result.first.outside_fraction, REGION_MARGIN)
     shift = summary["centroid_shift_mm"]
     log.info("speckle tracking: %d frames, %.1f ms per frame", seq.n_frames, summary["ms_per_frame_mean"] or 0.0)
     console.print(f"tracked {seq.n_frames} frames: the target's centroid moved up to {max(shift):.2f} mm; "

@@ -87,10 +87,9 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
                                 pixel_mm=plane.pixel_mm)
     write_png_stack(folder / "observation" / "frames", obs.frame_masks, prefix="frame_", digits=4)
     if obs.motion is not None:   # the speckle-tracked material points beside the masks
-        from hifumotion.speckle.output import material_points, material_points_csv
+        from hifumotion.speckle.output import material_points, write_material_points
 
-        write_text(folder / "observation" / "material_points.csv",
-                   material_points_csv(material_points(obs.motion), obs.motion.displacement.spacing_mm))
+        write_material_points(folder / "observation", material_points(obs.motion), obs.motion.displacement.spacing_mm)
     write_png_stack(folder / "observation" / "sweep", obs.sweep.masks, prefix="slice_", digits=3)
     rec.write(folder / "observation")
     summary = {

@@ -83,8 +83,11 @@ def _volume_image(volume: np.ndarray, spacing_mm, frame_interval_s, slice_positi
 
 
 def write_nifti(path: str | Path, volume: np.ndarray, spacing_mm, frame_interval_s: float | None = None,
-                slice_positions_mm=None) -> Path:
-    """Write ``(T, H, W)`` (or ``(H, W)``) data as NIfTI with its geometry; see the module notes."""
+                slice_positions_mm=None, origin_px: tuple[float, float] | None = None) -> Path:
+    """Write ``(T, H, W)`` (or ``(H, W)``) data as NIfTI with its geometry; see the module notes.
+
+    ``origin_px`` ``(x, y)``: where the data's first pixel lies on the full image (a crop), so a
+    viewer places it over the image it was cut from."""
     vol = np.asarray(volume)
     if vol.ndim == 2:
         vol = vol[None]
@@ -94,6 +97,11 @@ def write_nifti(path: str | Path, volume: np.ndarray, spacing_mm, frame_interval
         order = np.argsort(np.asarray(slice_positions_mm, float))
         vol, slice_positions_mm = vol[order], np.asarray(slice_positions_mm, float)[order]
     image = _volume_image(vol, spacing_mm, frame_interval_s, slice_positions_mm)
+    if origin_px is not None:
+        row, col = as_spacing_mm(spacing_mm)
+        origin = list(image.GetOrigin())
+        origin[0], origin[1] = float(origin_px[0]) * col, float(origin_px[1]) * row
+        image.SetOrigin(origin)
     with atomic_path(path) as tmp:
         sitk.WriteImage(image, str(tmp), useCompression=True)
     return Path(path)

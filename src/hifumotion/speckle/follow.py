@@ -91,13 +91,40 @@ class TargetSegmentation:
 
     ``mask``: the target; ``excluded``: the pixels masked out of the image before the level
     set ran (the solids and the bar's bloom); ``bloom_px``: the bar's measured bloom
-    ``(rows, cols)``; ``speckle_fwhm_px``: the speckle's size ``(rows, cols)``.
+    ``(rows, cols)``; ``speckle_fwhm_px``: the speckle's size ``(rows, cols)``;
+    ``outside_fraction``: the share of the level set's segmentation that lay beyond the given
+    region's margin (:data:`REGION_MARGIN`); ``given_region_kept``: True when that share passed
+    :data:`REGION_LEAK_FRACTION` and the given region was followed instead.
     """
 
     mask: np.ndarray
     excluded: np.ndarray
     bloom_px: tuple[int, int]
     speckle_fwhm_px: tuple[float, float]
+    outside_fraction: float = 0.0
+    given_region_kept: bool = False
+
+
+#: How far outside the given initial region frame 0's segmentation may reach, as a fraction of
+#: the region's equivalent radius √(area/π): a clinician's rough contour is off by a fraction of
+#: the target's size (≤ 0.17 on the twins), a level set that leaked into the neighbouring tissue
+#: is off by its whole size.
+REGION_MARGIN = 0.25
+#: The share of the segmentation beyond that margin at which it is taken for a leak and not
+#: followed: the given region is followed instead, and the result says so.
+REGION_LEAK_FRACTION = 0.10
+
+
+def region_leak(mask: np.ndarray, given: np.ndarray) -> float:
+    """The share of ``mask`` lying beyond the ``given`` region grown by :data:`REGION_MARGIN` of
+    its equivalent radius (0 for an empty mask)."""
+    from scipy import ndimage
+
+    if not mask.any() or not given.any():
+        return 0.0
+    radius_px = np.sqrt(given.sum() / np.pi)
+    beyond = ndimage.distance_transform_edt(~given) > REGION_MARGIN * radius_px
+    return float((mask & beyond).sum() / mask.sum())
 
 
 def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Solids | None = None,
@@ -114,6 +141,9 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
     3. The segmentation, less the solids, is moved inwards by ``boundary_offset_mm`` (the
        imaging system's, measured on a phantom) on its free boundary only: where it lies on a
        solid it is already where the solid's surface is.
+    4. A segmentation that leaves the given region (more than :data:`REGION_LEAK_FRACTION` of
+       it beyond :data:`REGION_MARGIN` of the region's radius) is not the target drawn: the given
+       region is kept instead, and ``given_region_kept`` says so.
     """
     from scipy import ndimage
 
@@ -148,7 +178,13 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
     if not mask.any():
         raise InputError("the target's segmentation is empty once the known solids are removed; "
                          "check the initial contour", "init")
-    return TargetSegmentation(mask, excluded, bloom, fwhm)
+    leak = region_leak(mask, inside)
+    if leak > REGION_LEAK_FRACTION:
+        # the level set left the region it was given (into tissue of the same grey level): what
+        # it found is not the target the user drew, and carried through the cine it would be
+        # followed as if it were
+        return TargetSegmentation(inside, excluded, bloom, fwhm, leak, True)
+    return TargetSegmentation(mask, excluded, bloom, fwhm, leak, False)
 
 
 def refine_in_band(image: np.ndarray, carried: np.ndarray, excluded: np.ndarray, background: float,

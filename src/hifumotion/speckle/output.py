@@ -4,13 +4,23 @@ Layout (lengths in mm, times in s)::
 
     masks/frame_NNNN.png        the target in every frame (0/255)
     masks.nii.gz                the same as 2D+t label map (3D Slicer)
-    contours.csv, .json         every frame's contour (point i is the same material point)
-    displacement_x_mm.nii.gz    Lagrangian displacement of frame 0's pixels, x (column) component
-    displacement_y_mm.nii.gz    … y (row) component; NaN on the known solids
-    quality.nii.gz              its per-pixel quality (local NCC with frame 0; 0 = filled)
-    material_points.csv         frame, point, kind (contour/interior), x_mm, y_mm, dx_mm, dy_mm, quality
+    contours.csv                every frame's contour (point i is the same material point), at
+                                most 256 points a frame
+    material_points.npz         the material points' trajectories: rest_mm, kind (contour/interior),
+                                displacement_mm (T, N, 2), quality (T, N); a grid of at most 2,000 inside
+    material_points.csv         one row a point: x0_mm, y0_mm, last and largest displacement, mean quality
     tracking.json               speckle size, bar bloom, the bar's tracked push, timings
     motion.png                  frame 0 and the last frame with the contours; displacement quiver; strain
+
+With ``fields`` (``track --fields``), the dense Lagrangian field around the target (frame 0's
+target grown by :data:`FIELD_MARGIN_MM`, cut to its box and placed there)::
+
+    displacement_x_mm.nii.gz    displacement of frame 0's pixels, x (column) component
+    displacement_y_mm.nii.gz    … y (row) component
+    quality.nii.gz              its per-pixel quality (local NCC with frame 0; 0 = filled)
+
+NIfTI as ITK writes it keeps no NaN: pixels without an estimate (the known solids, and the box's
+pixels beyond the margin) hold displacement 0 and quality 0 — read the quality to tell them.
 
 Given points (``track --points``)::
 
@@ -42,15 +52,37 @@ def interior_points_px(mask: np.ndarray, step_px: float) -> np.ndarray:
     return np.column_stack([cols[keep], rows[keep]]).astype(float)
 
 
-def material_points(result: FollowResult, interior_step_mm: float = 1.0) -> dict[str, np.ndarray]:
+#: Most contour points written a frame (every k-th of the carried ones, so point i stays one
+#: material point): a target's outline needs no more, and 500 frames of 1-px steps made 36 MB.
+MAX_CONTOUR_POINTS_WRITTEN = 256
+#: How far around frame 0's target the dense field is written (mm; at least 3 px).
+FIELD_MARGIN_MM = 2.0
+
+#: Most interior material points written: the grid's step grows until the target holds no more
+#: (a 1 mm grid over a large region in coarse pixels made 7,500 points × 500 frames).
+MAX_INTERIOR_POINTS = 2000
+
+
+def material_points(result: FollowResult, interior_step_mm: float = 1.0,
+                    max_interior: int = MAX_INTERIOR_POINTS) -> dict[str, np.ndarray]:
     """The material points of the fit: the contour's and a grid inside frame 0's section.
 
-    Returns ``kind`` (N,), ``rest_px`` (N, 2), ``displacement_mm`` (T, N, 2), ``quality`` (T, N).
+    The grid's step is ``interior_step_mm``, grown (by whole pixels) until at most
+    ``max_interior`` points fall inside. Returns ``kind`` (N,), ``rest_px`` (N, 2),
+    ``displacement_mm`` (T, N, 2), ``quality`` (T, N) and ``interior_step_mm``.
     """
     series = result.displacement
     spacing = series.spacing_mm
     contour0 = result.contours[0].points_px
-    inner = interior_points_px(result.masks[0], interior_step_mm / float(np.mean(spacing)))
+    pixel = float(np.mean(spacing))
+    step_px = max(int(round(interior_step_mm / pixel)), 1)
+    area_px = int(result.masks[0].sum())
+    if area_px > max_interior * step_px ** 2:
+        step_px = int(np.ceil(np.sqrt(area_px / max_interior)))
+    inner = interior_points_px(result.masks[0], step_px)
+    while len(inner) > max_interior:   # the erosion's rounding: one more pixel of step
+        step_px += 1
+        inner = interior_points_px(result.masks[0], step_px)
     rest = np.vstack([contour0, inner])
     kind = np.array(["contour"] * len(contour0) + ["interior"] * len(inner))
     disp, qual = [], []
@@ -58,22 +90,51 @@ def material_points(result: FollowResult, interior_step_mm: float = 1.0) -> dict
         d, q = series.at(rest, t)
         disp.append(d)
         qual.append(q)
-    return {"kind": kind, "rest_px": rest, "displacement_mm": np.stack(disp), "quality": np.stack(qual)}
+    return {"kind": kind, "rest_px": rest, "displacement_mm": np.stack(disp), "quality": np.stack(qual),
+            "interior_step_mm": step_px * pixel}
 
 
 def material_points_csv(points: dict[str, np.ndarray], spacing_mm) -> str:
+    """One row a material point: where it was on frame 0 (mm), its displacement on the last
+    frame and the largest over the frames (mm), its mean quality. The trajectories themselves
+    are in ``material_points.npz`` (:func:`write_material_points`)."""
     row, col = spacing_mm
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["frame", "point", "kind", "x0_mm", "y0_mm", "dx_mm", "dy_mm", "quality"])
+    w.writerow(["point", "kind", "x0_mm", "y0_mm", "last_dx_mm", "last_dy_mm", "largest_displacement_mm",
+                "mean_quality"])
     rest_mm = points["rest_px"] * np.array([col, row])
-    for t in range(points["displacement_mm"].shape[0]):
-        d, q = points["displacement_mm"][t], points["quality"][t]
-        for i in range(len(rest_mm)):
-            w.writerow([t, i, points["kind"][i], f"{rest_mm[i, 0]:.4f}", f"{rest_mm[i, 1]:.4f}",
-                        "" if not np.isfinite(d[i, 0]) else f"{d[i, 0]:.5f}",
-                        "" if not np.isfinite(d[i, 1]) else f"{d[i, 1]:.5f}", f"{q[i]:.4f}"])
+    d = points["displacement_mm"]
+    last = d[-1]
+    with np.errstate(invalid="ignore"):
+        largest = np.nanmax(np.linalg.norm(d, axis=2), axis=0) if np.isfinite(d).any() else np.full(len(rest_mm), np.nan)
+    quality = points["quality"].mean(axis=0)
+
+    def num(v, digits):
+        return "" if not np.isfinite(v) else f"{v:.{digits}f}"
+
+    for i in range(len(rest_mm)):
+        w.writerow([i, points["kind"][i], f"{rest_mm[i, 0]:.4f}", f"{rest_mm[i, 1]:.4f}", num(last[i, 0], 5),
+                    num(last[i, 1], 5), num(largest[i], 5), f"{quality[i]:.4f}"])
     return buf.getvalue()
+
+
+def write_material_points(folder: str | Path, points: dict[str, np.ndarray], spacing_mm) -> None:
+    """``material_points.npz`` (every frame: ``rest_mm`` (N, 2), ``kind`` (N,),
+    ``displacement_mm`` (T, N, 2) float32, ``quality`` (T, N) float16) and the one-row-a-point
+    summary ``material_points.csv`` into ``folder``."""
+    from hifumotion.io.files import atomic_path, write_text
+
+    folder = Path(folder)
+    row, col = spacing_mm
+    with atomic_path(folder / "material_points.npz") as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, rest_mm=(points["rest_px"] * np.array([col, row])).astype(np.float32),
+                                kind=points["kind"].astype("U8"),
+                                displacement_mm=points["displacement_mm"].astype(np.float32),
+                                quality=points["quality"].astype(np.float16),
+                                spacing_mm=np.asarray(spacing_mm, float))
+    write_text(folder / "material_points.csv", material_points_csv(points, spacing_mm))
 
 
 def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) -> Path:
@@ -120,46 +181,6 @@ def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) ->
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return Path(path)
-
-
-def write_tracking(folder: str | Path, frames: np.ndarray, result: FollowResult, frame_interval_s: float | None,
-                   extra: dict | None = None) -> dict:
-    """Write the layout of the module docstring into ``folder``; returns ``tracking.json``'s content."""
-    from hifumotion.io import write_contours_csv, write_contours_json, write_json, write_masks_nifti, write_png_stack
-    from hifumotion.io.files import write_text
-    from hifumotion.io.writers import write_nifti
-
-    folder = Path(folder)
-    series: DisplacementSeries = result.displacement
-    spacing = series.spacing_mm
-    write_png_stack(folder / "masks", result.masks)
-    write_masks_nifti(folder / "masks.nii.gz", result.masks, spacing, frame_interval_s)
-    contours = dict(enumerate(result.contours))
-    write_contours_csv(folder / "contours.csv", contours)
-    write_contours_json(folder / "contours.json", contours)
-    write_nifti(folder / "displacement_x_mm.nii.gz", series.displacement_mm[..., 0], spacing, frame_interval_s)
-    write_nifti(folder / "displacement_y_mm.nii.gz", series.displacement_mm[..., 1], spacing, frame_interval_s)
-    write_nifti(folder / "quality.nii.gz", series.quality, spacing, frame_interval_s)
-    points = material_points(result)
-    write_text(folder / "material_points.csv", material_points_csv(points, spacing))
-    motion_figure(frames, result, folder / "motion.png")
-    first = result.first
-    centroid = np.array([c.centroid_mm for c in result.contours])
-    summary = {
-        "frames": int(series.n_frames), "spacing_mm": list(spacing), "frame_interval_s": frame_interval_s,
-        "estimator": series.estimator,
-        "speckle_fwhm_px": None if first is None else [round(float(v), 3) for v in first.speckle_fwhm_px],
-        "bar_bloom_px": None if first is None else list(first.bloom_px),
-        "ms_per_frame_mean": round(1000 * float(np.mean(result.seconds_per_frame[1:])), 3)
-        if series.n_frames > 1 else None,
-        "centroid_shift_mm": np.round(np.linalg.norm(centroid - centroid[0], axis=1), 4).tolist(),
-        "bar_shift_mm": None if series.rigid_shift_mm is None else np.round(series.rigid_shift_mm, 4).tolist(),
-        "material_points": {"contour": int((points["kind"] == "contour").sum()),
-                            "interior": int((points["kind"] == "interior").sum())},
-        **(extra or {}),
-    }
-    write_json(folder / "tracking.json", summary)
-    return summary
 
 
 def points_figure(frames: np.ndarray, track: PointTrack, path: str | Path) -> Path:
@@ -212,4 +233,70 @@ def write_point_track(folder: str | Path, frames: np.ndarray, track: PointTrack,
     return summary
 
 
-__all__ = ["points_figure", "write_point_track", "write_tracking", "material_points", "material_points_csv", "interior_points_px", "motion_figure"]
+def write_fields(folder: str | Path, series: DisplacementSeries, target: np.ndarray,
+                 frame_interval_s: float | None) -> dict:
+    """The dense displacement and quality around frame 0's ``target`` (module docstring); returns
+    the box written, ``{"origin_px": [x, y], "shape_px": [h, w]}``."""
+    from scipy import ndimage
+
+    from hifumotion.io.writers import write_nifti
+
+    spacing = series.spacing_mm
+    grow = max(int(np.ceil(FIELD_MARGIN_MM / min(spacing))), 3)
+    near = ndimage.binary_dilation(target, iterations=grow) if target.any() else np.ones_like(target)
+    rows, cols = np.nonzero(near)
+    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+    keep = near[box][None]
+    origin = (int(cols.min()), int(rows.min()))
+    for name, data in (("displacement_x_mm", series.displacement_mm[..., 0]),
+                       ("displacement_y_mm", series.displacement_mm[..., 1]), ("quality", series.quality)):
+        cut = np.where(keep, np.nan_to_num(data[:, box[0], box[1]], nan=0.0), np.float32(0.0)).astype(np.float32)
+        write_nifti(Path(folder) / f"{name}.nii.gz", cut, spacing, frame_interval_s, origin_px=origin)
+    return {"origin_px": list(origin), "shape_px": [int(box[0].stop - box[0].start), int(box[1].stop - box[1].start)]}
+
+
+def write_tracking(folder: str | Path, frames: np.ndarray, result: FollowResult, frame_interval_s: float | None,
+                   extra: dict | None = None, fields: bool = False) -> dict:
+    """Write the layout of the module docstring into ``folder``; returns ``tracking.json``'s content."""
+    from hifumotion.contour import Contour
+    from hifumotion.io import write_contours_csv, write_json, write_masks_nifti, write_png_stack
+
+    folder = Path(folder)
+    series: DisplacementSeries = result.displacement
+    spacing = series.spacing_mm
+    write_png_stack(folder / "masks", result.masks)
+    write_masks_nifti(folder / "masks.nii.gz", result.masks, spacing, frame_interval_s)
+    every = int(np.ceil(len(result.contours[0].points_px) / MAX_CONTOUR_POINTS_WRITTEN))
+    write_contours_csv(folder / "contours.csv",
+                       {t: Contour(c.points_px[::every], c.spacing_mm) for t, c in enumerate(result.contours)})
+    field_box = write_fields(folder, series, result.masks[0], frame_interval_s) if fields else None
+    points = material_points(result)
+    write_material_points(folder, points, spacing)
+    motion_figure(frames, result, folder / "motion.png")
+    first = result.first
+    centroid = np.array([c.centroid_mm for c in result.contours])
+    summary = {
+        "frames": int(series.n_frames), "spacing_mm": list(spacing), "frame_interval_s": frame_interval_s,
+        "estimator": series.estimator,
+        "speckle_fwhm_px": None if first is None else [round(float(v), 3) for v in first.speckle_fwhm_px],
+        "bar_bloom_px": None if first is None else list(first.bloom_px),
+        "frame0_segmentation": None if first is None else {
+            "outside_given_region_fraction": round(float(first.outside_fraction), 4),
+            "given_region_kept": bool(first.given_region_kept)},
+        "ms_per_frame_mean": round(1000 * float(np.mean(result.seconds_per_frame[1:])), 3)
+        if series.n_frames > 1 else None,
+        "centroid_shift_mm": np.round(np.linalg.norm(centroid - centroid[0], axis=1), 4).tolist(),
+        "bar_shift_mm": None if series.rigid_shift_mm is None else np.round(series.rigid_shift_mm, 4).tolist(),
+        "contour_points_written": int(len(result.contours[0].points_px[::every])),
+        "material_points": {"contour": int((points["kind"] == "contour").sum()),
+                            "interior": int((points["kind"] == "interior").sum()),
+                            "interior_step_mm": round(float(points["interior_step_mm"]), 4)},
+        "fields": field_box,
+        **(extra or {}),
+    }
+    write_json(folder / "tracking.json", summary)
+    return summary
+
+
+__all__ = ["FIELD_MARGIN_MM", "MAX_CONTOUR_POINTS_WRITTEN", "MAX_INTERIOR_POINTS", "points_figure", "write_fields", "write_material_points", "write_point_track", "write_tracking",
+           "material_points", "material_points_csv", "interior_points_px", "motion_figure"]

@@ -40,6 +40,11 @@ from hifumotion.errors import InputError
 WINDOW_PX = 31
 #: Pyramid levels above the finest (each halves the image): steps of up to ≈ 2**LEVELS × the window.
 LEVELS = 3
+#: The finest pyramid level DIS estimates on (0 = full resolution, each level halves it). At a
+#: quarter of the resolution its steps on speckle are biased by up to a tenth of a pixel (half the
+#: resolution: a hundredth), which the anchoring removes; on the real cine both scored alike, and
+#: a quarter costs 3 ms a frame at 320 × 240 where a half costs 7 (docs/decisions.md).
+DIS_FINEST_SCALE = 2
 #: A point's direct registration to its anchor frame replaces the chained position when the two
 #: agree within this (px); further apart, the anchor is renewed (:meth:`PointTracker._anchored`).
 ANCHOR_TOLERANCE_PX = 0.5
@@ -162,9 +167,7 @@ class PointTracker:
         self.points = check_points(points_px, self.shape)
         self.previous = _u8(frame0)
         self.dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_FAST)
-        # the fast preset stops at a quarter of the resolution, which biases each step by a
-        # tenth of a pixel on speckle — 3 px over 30 frames; half the resolution does not
-        self.dis.setFinestScale(1)
+        self.dis.setFinestScale(DIS_FINEST_SCALE)
         self.criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
         self.frames_seen = 1
         # each point's anchor: the frame it is registered to directly, and where it was there
