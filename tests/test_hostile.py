@@ -70,6 +70,7 @@ def build_scratch(root: Path) -> Path:
     _write_png(root / "grey_mask.png", (disc * 128 + 40).astype(np.uint8))
     _write_png(root / "mask40.png", (disc[12:52, 12:52] * 255).astype(np.uint8))    # fits good.nii.gz's 40 × 40
     _write_png(root / "small_mask.png", np.zeros((10, 10), np.uint8))
+    _write_png(root / "whole40.png", np.full((40, 40), 255, np.uint8))               # every pixel of good.nii.gz
     (root / "empty.png").write_bytes(b"")
     (root / "garbage.png").write_bytes(rng.bytes(300))
     (root / "afile.txt").write_text("not a folder\n")
@@ -93,6 +94,12 @@ def build_scratch(root: Path) -> Path:
     os.mkfifo(root / "fifo.png")
     init = json.loads((root / "ph" / "init.json").read_text())
     key = next(iter(init))
+    import imageio.v3 as iio
+
+    phantom_shape = iio.imread(root / "ph" / "images" / "phantom.png").shape[:2]
+    _write_png(root / "whole_phantom.png", np.full(phantom_shape, 255, np.uint8))
+    _write_png(root / "empty_phantom.png", np.zeros(phantom_shape, np.uint8))
+    (root / "whole_init.json").write_text(json.dumps({"ellipse": {"cx": 48, "cy": 48, "a": 200, "b": 200, "angle_deg": 0}}))
     (root / "huge_init.json").write_text(json.dumps({"ellipse": {"cx": 40, "cy": 40, "a": 1e9, "b": 1e9, "angle_deg": 0}}))
     (root / "negative_init.json").write_text(json.dumps({"ellipse": {"cx": 40, "cy": 40, "a": -3, "b": 5, "angle_deg": 0}}))
     (root / "outside_init.json").write_text(json.dumps({"ellipse": {"cx": 4000, "cy": -900, "a": 5, "b": 5, "angle_deg": 0}}))
@@ -286,6 +293,12 @@ CASES = [
     (["calibrate", "observed_field", "--tracking", "magic", "-o", "out"], "--tracking"),
     (["calibrate", "observed_field", "--force", "1e-300", "-o", "out"], "--force"),
     (["segment", "ph/images/phantom.png", "--init", "missing.json", "-o", "out"], "missing.json"),
+    # an initial contour around the whole image, or around nothing; a --name the file does not hold
+    (["segment", "ph/images/phantom.png", "--init", "whole_phantom.png", "-o", "out"], "whole_phantom.png"),
+    (["segment", "ph/images/phantom.png", "--init", "empty_phantom.png", "-o", "out"], "empty_phantom.png"),
+    (["segment", "ph/images/phantom.png", "--init", "whole_init.json", "-o", "out"], "whole_init.json"),
+    (["track", "good.nii.gz", "--init", "whole40.png", "-o", "out"], "whole40.png"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "--name", "other.png", "-o", "out"], "other.png"),
     (["segment", "ph/images/phantom.png", "--init", "short_row.csv", "-o", "out"], "line 3"),
     (["segment", "ph/images/phantom.png", "--init", "nan_point.csv", "-o", "out"], "finite"),
     (["segment", "ph/images/phantom.png", "--init", "bad.json", "-o", "out"], "bad.json"),

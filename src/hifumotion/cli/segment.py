@@ -27,6 +27,9 @@ def load_init(path: Path, image_path: Path, name: Optional[str], init_kind: Opti
         if "ellipse" in data or "points" in data:
             return parse_init_entry(data, init_kind, where=str(path))
         key = name or image_path.name
+        if name is not None and name not in data:
+            keys = ", ".join(sorted(data)[:5]) + (" …" if len(data) > 5 else "")
+            raise InputError(f"has no entry '{name}' (from --name); its keys: {keys}", path)
         if key not in data:
             if len(data) == 1:
                 key = next(iter(data))
@@ -62,7 +65,7 @@ def segment(
                                write_masks_nifti, write_png_stack)
     from hifumotion.run_info import RunRecord
     from hifumotion.segmentation import METHODS, track as track_frames
-    from hifumotion.segmentation.levelset import check_init
+    from hifumotion.segmentation.levelset import check_init_region
 
     if method.lower() not in METHODS:
         raise InputError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}", "--method")
@@ -70,7 +73,7 @@ def segment(
         raise InputError("expected 'ellipse' or 'points'", "--init-kind")
     seq = read_sequence(source, parse_spacing(spacing), frame_interval)
     start = load_init(init, source, name, init_kind, seq.shape)
-    check_init(start, seq.shape, str(init))
+    check_init_region(start, seq.shape, str(init))
     record = RunRecord("segment", config={"source": str(source), "init": str(init), "method": method,
                                           "init_kind": init_kind, "spacing_mm": list(seq.spacing_mm),
                                           "frame_interval_s": seq.frame_interval_s})

@@ -69,7 +69,7 @@ def track(
     from hifumotion.io import output_folder, read_sequence
     from hifumotion.run_info import RunRecord
     from hifumotion.segmentation import METHODS
-    from hifumotion.segmentation.levelset import check_init
+    from hifumotion.segmentation.levelset import check_init_region
     from hifumotion.speckle import follow
     from hifumotion.speckle._flow import ESTIMATORS
     from hifumotion.speckle.displacement import displacement
@@ -108,7 +108,7 @@ def track(
         # the track's displacements and contours are in mm: a pixel size guessed would scale them all
         raise InputError("carries no pixel size; give it with --spacing MM (or 'ROW,COL')", cine)
     start = load_init(init, cine, None, None, seq.shape)
-    check_init(start, seq.shape, str(init))
+    check_init_region(start, seq.shape, str(init))
     solids = _solids_from_files(setup, exclude, bar, seq.frames[0])
     record = RunRecord("track", config={"source": str(source), "init": str(init), "setup": None if setup is None else str(setup),
                                         "exclude": None if exclude is None else str(exclude),

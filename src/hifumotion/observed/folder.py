@@ -150,7 +150,11 @@ def load_observed(folder: str | Path) -> Observed:
     even = len(z) > 1 and np.allclose(steps, steps[0], rtol=1e-3, atol=1e-6)
     _same_as_pngs(root / "sweep.nii.gz", sweep, "sweep/", setup.pixel_mm,
                   spacing_t=float(steps[0]) if even else None, what_t="sweep_positions.csv's spacing", unit_t="mm", stepped_dimension=3)
-    return Observed(sweep, z, frames, read_initial_contour(root, setup), setup)
+    contour = read_initial_contour(root, setup)
+    from hifumotion.segmentation.levelset import check_init_region
+
+    check_init_region(contour, frames.shape[1:], str(root / "initial_contour.csv"))
+    return Observed(sweep, z, frames, contour, setup)
 
 
 def read_initial_contour(folder: str | Path, setup: Setup) -> Contour:

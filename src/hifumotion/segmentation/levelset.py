@@ -140,6 +140,26 @@ def check_init(init: Any, shape: tuple[int, int], where: str = "init") -> None:
                          f"the {h} × {w} px image", where)
 
 
+#: Largest share of the image an initial contour may enclose: it outlines a target, and a level
+#: set needs the background beside it to tell the two apart.
+MAX_INIT_COVERAGE = 0.9
+
+
+def check_init_region(init: Any, shape: tuple[int, int], where: str = "init") -> np.ndarray:
+    """The initial region (bool mask) of a checked initial contour (:func:`check_init`); raise
+    :class:`InputError` (naming ``where``) when it encloses no pixel or more than
+    :data:`MAX_INIT_COVERAGE` of the image. For the edges where a user's contour enters."""
+    check_init(init, shape, where)
+    region = initial_phi(init, shape) > 0
+    share = float(region.mean())
+    if not region.any():
+        raise InputError("the initial contour encloses no pixel of the image", where)
+    if share > MAX_INIT_COVERAGE:
+        raise InputError(f"the initial contour encloses {100 * share:.0f} % of the image; expected the target's "
+                         f"outline (at most {100 * MAX_INIT_COVERAGE:.0f} %)", where)
+    return region
+
+
 def initial_phi(init: Any, shape: tuple[int, int]) -> np.ndarray:
     """φ for any initial contour: an :class:`Ellipse`, :class:`ClickedPoints` (closed smooth
     curve through them), a :class:`Contour`, an ``(N, 2)`` point array ``(x, y)``, or a mask."""
