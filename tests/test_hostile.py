@@ -151,6 +151,9 @@ def build_scratch(root: Path) -> Path:
     (root / "scene_duration.toml").write_text("[run]\nduration_s = 1e9\n")
     (root / "scene_steps.toml").write_text("[run]\nduration_s = 5000.0\noutput_interval_s = 1.0\nmax_step_s = 1e-9\n")
     (root / "twin_seed.toml").write_text("seed = -5\n")
+    (root / "twin_blob0.toml").write_text("[blob]\nsize_mm = [0.0, 18.0, 24.0]\n")
+    (root / "twin_blob_tiny.toml").write_text("[blob]\nsize_mm = [0.01, 0.01, 0.01]\n")
+    (root / "twin_blob_nan.toml").write_text("[blob]\nsize_mm = [nan, 18.0, 24.0]\n")
     (root / "twin_frames.toml").write_text("[imaging]\nframes = 100000000\n")
     os.symlink("loop", root / "loop")                      # a symbolic link to itself
     # headers whose data file is a device, a FIFO or some other file of the system
@@ -424,6 +427,8 @@ CASES = [
     (["simulate", "scene_steps.toml", "-o", "out"], "max_step_s"),
     (["simulate", "scene_interval.toml", "--integrator", "implicit", "-o", "out"], "output_interval_s"),
     (["experiment", "--config", "twin_seed.toml", "-o", "out"], "seed"),
+    *[(["experiment", "--preset", "small", "--config", f"twin_blob{kind}.toml", "-o", "out"], "blob.size_mm")
+      for kind in ("0", "_tiny", "_nan")],
     (["experiment", "--config", "twin_frames.toml", "-o", "out"], "frames"),
     # an output path that is a symbolic link to itself
     (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "loop"], "loop"),

@@ -19,7 +19,8 @@ import copy
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field
+import numpy as np
+from pydantic import Field, field_validator
 
 from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
@@ -33,6 +34,15 @@ class BlobConfig(ConfigModel):
     irregularity: float = Field(0.12, ge=0, le=0.4, description="relative height of the sample's lumps (0: an ellipsoid)")
     lobes: int = Field(6, ge=1, le=30, description="number of random waves making the lumps")
     bottom_cut: float = Field(0.2, ge=0, lt=0.5, description="fraction of the ellipsoid's height cut off flat: the face the sample rests on")
+
+    @field_validator("size_mm")
+    @classmethod
+    def _a_sample(cls, v):
+        # a sample is seen by a probe of ~1 mm resolution and sits in a tank of ~10 cm: below 1 mm it
+        # has no image and its particle spacing makes the tank's water unbounded work; above 1 m no tank holds it
+        if not all(np.isfinite(s) and 1.0 <= s <= 1000.0 for s in v):
+            raise ValueError(f"each extent of the sample must be 1 … 1000 mm, got {list(v)}")
+        return v
 
 
 class ResolutionConfig(ConfigModel):
