@@ -172,6 +172,13 @@ def build_scratch(root: Path) -> Path:
                ImageOrientationPatient=[1, 0, 0, 0, 1, 0], patch={"1.0\\0.0\\0.0\\0.0\\1.0\\0.0": "1.0\\0.0\\0.0            "})
         _dicom(root / "instance_x" / f"s{k}.dcm", frames=1, PixelSpacing=[0.25, 0.25], InstanceNumber=k + 10,
                patch={b"\x13\x00IS\x02\x00" + str(k + 10).encode(): b"\x13\x00IS\x02\x00x "})
+    import pydicom
+
+    for declared, name in ((0, "frames_zero.dcm"), (1, "frames_one_of_three.dcm"), (7, "frames_seven_of_three.dcm")):
+        _dicom(root / name, PixelSpacing=[0.25, 0.25], FrameTime=50.0)       # three frames of pixel data
+        ds = pydicom.dcmread(root / name)
+        ds.NumberOfFrames = declared
+        ds.save_as(root / name)
     bad_setup = root / "observed_bad"
     bad_setup.mkdir()
     (bad_setup / "setup.json").write_text("{ broken")
@@ -276,6 +283,11 @@ CASES = [
     (["info", "image.png", "--spacing", "nan"], "--spacing"),
     (["info", "image.png", "--kind", "nope"], "kind"),
     (["info", "image.png", "--frame-interval", "0"], "--frame-interval"),
+    # a DICOM whose NumberOfFrames is not what its pixel data holds
+    (["info", "frames_zero.dcm"], "NumberOfFrames"),
+    (["info", "frames_one_of_three.dcm"], "NumberOfFrames"),
+    (["info", "frames_seven_of_three.dcm"], "frames_seven_of_three.dcm"),
+    (["track", "frames_one_of_three.dcm", "--init", "mask40.png", "-o", "out"], "NumberOfFrames"),
     # hifumotion segment
     # hifumotion track: a cine and what it needs
     (["track", "good.nii.gz", "-o", "out"], "--init"),

@@ -167,17 +167,30 @@ def _pixels(ds: pydicom.Dataset, path: Path) -> np.ndarray:
     if not any(k in ds for k in _PIXEL_KEYWORDS):
         raise InputError("DICOM has no pixel data (no PixelData element)", path)
     try:
-        pixels = ds.pixel_array  # pydicom >= 3 converts YBR colour to RGB by default
+        declared = _numbers(ds, "NumberOfFrames", 1, expected="a whole number of frames ≥ 1")
+    except _Malformed as exc:
+        raise InputError(str(exc), path) from None
+    if declared is not None and not (declared[0] >= 1 and float(declared[0]).is_integer()):
+        raise InputError(f"NumberOfFrames is {declared[0]:g}; expected a whole number of frames ≥ 1", path)
+    frames = 1 if declared is None else int(declared[0])
+    try:
+        with warnings.catch_warnings():
+            # pydicom warns, then returns what it guessed, where the pixel data and NumberOfFrames
+            # disagree: the disagreement is checked below and named instead
+            warnings.simplefilter("ignore")
+            pixels = ds.pixel_array  # pydicom >= 3 converts YBR colour to RGB by default
     except Exception as exc:
         raise InputError(f"cannot decode DICOM pixel data ({brief(exc)})", path) from None
-    frames = int(ds.get("NumberOfFrames", 1) or 1)
     colour = int(ds.get("SamplesPerPixel", 1)) > 1
     frame_ndim = 2
     if frames == 1:
         pixels = pixels[None]
     pixels = to_grey(pixels, colour and has_channels(pixels, frame_ndim + 1))
-    if pixels.ndim != 3:
-        raise InputError(f"unexpected DICOM pixel array shape {pixels.shape}", path)
+    if pixels.ndim != 3 or pixels.shape[0] != frames:
+        held = pixels.shape[1] if pixels.ndim == 4 and frames == 1 else None
+        if held is not None:
+            raise InputError(f"NumberOfFrames is {frames}; the pixel data holds {held} frames", path)
+        raise InputError(f"unexpected DICOM pixel array shape {pixels.shape} for {frames} frame(s)", path)
     return pixels
 
 
