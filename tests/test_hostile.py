@@ -151,6 +151,10 @@ def build_scratch(root: Path) -> Path:
     (root / "scene_duration.toml").write_text("[run]\nduration_s = 1e9\n")
     (root / "scene_steps.toml").write_text("[run]\nduration_s = 5000.0\noutput_interval_s = 1.0\nmax_step_s = 1e-9\n")
     (root / "twin_seed.toml").write_text("seed = -5\n")
+    (root / "scene_water.toml").write_text("[tank]\nwater_depth_mm = 1e9\n")
+    (root / "scene_beta2.toml").write_text("[tissue]\nbeta2 = -3.0\n")
+    (root / "scene_negative_size.toml").write_text("[tissue]\nsize_mm = [30.0, -18.0, 24.0]\n")
+    (root / "twin_water.toml").write_text("[tank]\nwater_depth_mm = 1e9\n")
     (root / "twin_blob0.toml").write_text("[blob]\nsize_mm = [0.0, 18.0, 24.0]\n")
     (root / "twin_blob_tiny.toml").write_text("[blob]\nsize_mm = [0.01, 0.01, 0.01]\n")
     (root / "twin_blob_nan.toml").write_text("[blob]\nsize_mm = [nan, 18.0, 24.0]\n")
@@ -439,6 +443,11 @@ CASES = [
     (["simulate", "scene_steps.toml", "-o", "out"], "max_step_s"),
     (["simulate", "scene_interval.toml", "--integrator", "implicit", "-o", "out"], "output_interval_s"),
     (["experiment", "--config", "twin_seed.toml", "-o", "out"], "seed"),
+    # physics no tank or tissue has: refused by the scene's validation, naming the setting
+    (["simulate", "scene_water.toml", "-o", "out"], "water_depth_mm"),
+    (["simulate", "scene_beta2.toml", "-o", "out"], "beta2"),
+    (["simulate", "scene_negative_size.toml", "-o", "out"], "tissue.size_mm"),
+    (["experiment", "--preset", "small", "--config", "twin_water.toml", "-o", "out"], "water_depth_mm"),
     *[(["experiment", "--preset", "small", "--config", f"twin_blob{kind}.toml", "-o", "out"], "blob.size_mm")
       for kind in ("0", "_tiny", "_nan")],
     (["experiment", "--config", "twin_frames.toml", "-o", "out"], "frames"),
@@ -510,6 +519,10 @@ POSITIVE_OPTIONS = [
     (["track", "good.nii.gz", "--init", "mask40.png", "-o", "out", "--frame-interval", "{}"], "--frame-interval"),
     (["track", "good.nii.gz", "--init", "mask40.png", "-o", "out", "--spacing", "{}"], "--spacing"),
     (["track", "good.nii.gz", "--points", "points_ok.csv", "-o", "out", "--spacing", "{}"], "--spacing"),
+    (["track", "good.nii.gz", "--points", "points_ok.csv", "-o", "out", "--frame-interval", "{}"], "--frame-interval"),
+    (["segment", "ph/images/phantom.png", "--init", "ph/init.json", "-o", "out", "--spacing", "{}"], "--spacing"),
+    (["segment", "good.nii.gz", "--init", "mask40.png", "-o", "out", "--frame-interval", "{}"], "--frame-interval"),
+    (["reconstruct", "masks", "--slice-spacing", "1", "-o", "out", "--spacing", "{}"], "--spacing"),
     (["score", "frame_masks", "frame_masks", "--spacing", "{}"], "--spacing"),
 ]
 CASES += [([a.format(value) for a in argv], word) for argv, word in POSITIVE_OPTIONS

@@ -59,6 +59,13 @@ class TankConfig(ConfigModel):
             raise ValueError("tank sizes must be positive (mm)")
         return v
 
+    @model_validator(mode="after")
+    def _water_in_the_tank(self):
+        if self.water_depth_mm > self.size_mm[1]:
+            raise ValueError(f"water_depth_mm ({self.water_depth_mm:g}) exceeds the tank's height size_mm[1] "
+                             f"({self.size_mm[1]:g} mm)")
+        return self
+
 
 class TissueMaterial(ConfigModel):
     """The tissue's material (Table 3's parameters and the model's options)."""
@@ -67,7 +74,7 @@ class TissueMaterial(ConfigModel):
     youngs_modulus_pa: float = Field(paper.YOUNGS_MODULUS_PA, gt=0, description="Young's modulus E in Pa (Table 3: 13 kPa)")
     poisson_ratio: float = Field(paper.POISSON_RATIO, gt=-1, lt=0.5, description="Poisson's ratio (Table 3: 0.47)")
     beta1: float = Field(paper.BETA1, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
-    beta2: float = Field(paper.BETA2, description="rheological viscosity exponent β2 (Table 3: 0.5)")
+    beta2: float = Field(paper.BETA2, gt=-1.0, le=3.0, description="rheological viscosity exponent β2 (Table 3: 0.5); the flow index 1 + β2 must be positive")
     rate_floor_per_s: float = Field(RATE_FLOOR_PER_S, gt=0, description="floor of the shear rate in the rheological viscosity μ = β1 max(rate, floor)^β2, in 1/s")
     volume_stiffness_pa: float = Field(0.0, ge=0, description="k_v of the volume-conservation force (Eq. 15–16) in Pa")
     hourglass: float = Field(1.0, ge=0, description="hourglass control α (0: off)")
