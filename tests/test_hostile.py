@@ -143,6 +143,16 @@ def build_scratch(root: Path) -> Path:
     (root / "points_mm.csv").write_text("x_mm,y_mm\n1,2\n")
     (root / "points_many.csv").write_text("x_px,y_px\n" + "1,1\n" * 10_001)
     (root / "deep_resume.jsonl").write_text(deep + "\n")
+    # a video of random bytes and an empty one; a PNG whose header claims 10¹⁰ pixels
+    (root / "garbage.mp4").write_bytes(rng.bytes(2000))
+    (root / "empty.avi").write_bytes(b"")
+    (root / "bomb.png").write_bytes(_png_bomb(100_000, 100_000))
+    # a sweep whose masks differ in size; predicted and true masks of different sizes
+    for k, pad in enumerate((0, 5)):
+        _write_png(root / "mixed_masks" / f"slice_{k:03d}.png", np.pad(disc[12:52, 12:52] * 255, pad).astype(np.uint8))
+        _write_png(root / "masks50" / f"frame_{k:04d}.png", np.pad(disc[12:52, 12:52] * 255, 5).astype(np.uint8))
+    _write_png(root / "tiny.png", np.zeros((2, 2), np.uint8))
+    _nifti(root / "tiny_cine.nii.gz", np.zeros((3, 4, 4), np.uint8))
     (root / "observed_deep").mkdir()
     (root / "observed_deep" / "setup.json").write_text('{"a": ' + deep + "}")
     (root / "scene_nested.toml").write_text("[bar]\nforce_n = " + "[" * 200 + "]" * 200 + "\n")
@@ -190,6 +200,19 @@ def build_scratch(root: Path) -> Path:
     missing_field.mkdir()
     (missing_field / "setup.json").write_text(json.dumps({"frame_interval_s": 0.05, "frames": 10}))
     return root
+
+
+def _png_bomb(width: int, height: int) -> bytes:
+    """A PNG whose header claims ``width × height`` grey pixels over a few bytes of data."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(b"\x00" * 1000))
+            + chunk(b"IEND", b""))
 
 
 def _dicom(path: Path, frames: int = 3, patch: dict | None = None, **attrs) -> None:
@@ -287,6 +310,24 @@ CASES = [
     (["info", "image.png", "--spacing", "nan"], "--spacing"),
     (["info", "image.png", "--kind", "nope"], "kind"),
     (["info", "image.png", "--frame-interval", "0"], "--frame-interval"),
+    # videos that are none, a decompression bomb, images of the wrong size for what they go with
+    (["info", "garbage.mp4"], "garbage.mp4"),
+    (["info", "empty.avi"], "empty.avi"),
+    (["track", "garbage.mp4", "--init", "mask40.png", "-o", "out"], "garbage.mp4"),
+    (["segment", "empty.avi", "--init", "ph/init.json", "-o", "out"], "empty.avi"),
+    (["info", "bomb.png"], "bomb.png"),
+    (["segment", "bomb.png", "--init", "ph/init.json", "-o", "out"], "bomb.png"),
+    (["segment", "ph/images/phantom.png", "--init", "bomb.png", "-o", "out"], "bomb.png"),
+    (["reconstruct", "mixed_masks", "--slice-spacing", "1", "--spacing", "0.2", "-o", "out"], "slice_001.png"),
+    (["score", "frame_masks", "masks50", "--spacing", "0.2"], "differ in size"),
+    (["segment", "tiny.png", "--init", "ph/init.json", "--name", "phantom.png", "-o", "out"], "tiny.png"),
+    (["segment", "tiny_cine.nii.gz", "--init", "ph/init.json", "--name", "phantom.png", "-o", "out"], "tiny_cine"),
+    (["track", "tiny_cine.nii.gz", "--points", "points_ok.csv", "-o", "out"], "tiny_cine"),
+    # one kind of file where another is due: points as a contour, a contour or a mask as points
+    (["track", "good.nii.gz", "--init", "points_ok.csv", "-o", "out"], "points_ok.csv"),
+    (["track", "good.nii.gz", "--points", "mask40.png", "-o", "out"], "mask40.png"),
+    (["track", "good.nii.gz", "--points", "ph/init.json", "-o", "out"], "init.json"),
+    (["track", "good.nii.gz", "--points", "short_row.csv", "-o", "out"], "short_row.csv"),
     # a DICOM whose NumberOfFrames is not what its pixel data holds
     (["info", "frames_zero.dcm"], "NumberOfFrames"),
     (["info", "frames_one_of_three.dcm"], "NumberOfFrames"),
@@ -576,7 +617,7 @@ def test_a_runs_frames_are_checked_against_each_other_before_any_work():
 
 
 def test_enough_hostile_cases():
-    assert len(CASES) >= 300 and len({c[0][0] for c in CASES}) >= 15
+    assert len(CASES) >= 450 and len({c[0][0] for c in CASES}) >= 15
 
 
 def test_overwrite_replaces_only_what_hifumotion_wrote(scratch, monkeypatch):

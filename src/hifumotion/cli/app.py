@@ -11,6 +11,7 @@ from typing import Optional
 import typer
 
 from hifumotion import __version__, console
+from hifumotion.errors import InputError
 
 app = typer.Typer(
     name="hifumotion",
@@ -42,7 +43,6 @@ def parse_spacing(text: Optional[str]) -> Optional[tuple[float, float]]:
     """``"0.2"`` or ``"0.2,0.25"`` (row, col mm) → a spacing tuple; None stays None."""
     if text is None:
         return None
-    from hifumotion.errors import InputError
     from hifumotion.sequence import as_spacing_mm
 
     try:
@@ -67,3 +67,16 @@ def positive(value: Optional[float]) -> Optional[float]:
     if value is not None and not (math.isfinite(value) and value > 0):
         raise typer.BadParameter(f"expected a positive number, got {value:g}")
     return value
+
+
+#: The smallest frame a level set or a tracker can work on (px, each side).
+MIN_FRAME_PX = 8
+
+
+def require_frame_size(shape: tuple[int, ...], source) -> None:
+    """Refuse frames smaller than :data:`MIN_FRAME_PX` on a side, naming ``source``, before
+    anything that goes with them (an initial contour, points) is checked against them."""
+    h, w = int(shape[-2]), int(shape[-1])
+    if min(h, w) < MIN_FRAME_PX:
+        raise InputError(f"has frames of {h} × {w} px; segmenting and tracking need at least "
+                         f"{MIN_FRAME_PX} × {MIN_FRAME_PX}", source)

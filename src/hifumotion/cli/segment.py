@@ -8,7 +8,7 @@ from typing import Any, Optional
 import numpy as np
 import typer
 
-from hifumotion.cli.app import app, parse_spacing, positive
+from hifumotion.cli.app import app, parse_spacing, positive, require_frame_size
 from hifumotion.console import console, log, track
 from hifumotion.errors import InputError
 
@@ -72,6 +72,7 @@ def segment(
     if init_kind not in (None, "ellipse", "points"):
         raise InputError("expected 'ellipse' or 'points'", "--init-kind")
     seq = read_sequence(source, parse_spacing(spacing), frame_interval)
+    require_frame_size(seq.shape, source)
     start = load_init(init, source, name, init_kind, seq.shape)
     check_init_region(start, seq.shape, str(init))
     record = RunRecord("segment", config={"source": str(source), "init": str(init), "method": method,

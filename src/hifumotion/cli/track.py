@@ -8,7 +8,7 @@ from typing import Optional
 import numpy as np
 import typer
 
-from hifumotion.cli.app import app, parse_spacing, positive
+from hifumotion.cli.app import app, parse_spacing, positive, require_frame_size
 from hifumotion.console import console, log
 from hifumotion.errors import InputError
 
@@ -101,6 +101,7 @@ def track(
         seq = read_sequence(cine, parse_spacing(spacing), frame_interval)
     if seq.n_frames < 2:
         raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
+    require_frame_size(seq.shape, cine)
     if init is None:
         _track_points_only(seq, source, points, output, overwrite)
         return
