@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -243,3 +244,15 @@ def test_the_runs_verdict_line_shows_both_margins_it_may_rest_on():
     # a run_info.json written before has no centroid margin: the DSC one alone
     old = {k: v for k, v in summary.items() if not k.startswith("centroid")}
     assert "centroid" not in _verdict(old)
+
+
+def test_flags_are_shown_as_flags_in_the_help():
+    """A flag takes no value: its help line shows none (Typer printed ``--overwrite <bool>``),
+    while options that take one still show its kind."""
+    proc = subprocess.run([sys.executable, "-m", "hifumotion", "track", "--help"], capture_output=True, text=True,
+                          timeout=60, env={**os.environ, "COLUMNS": "160"})
+    assert proc.returncode == 0, proc.stderr
+    overwrite = next(ln for ln in proc.stdout.splitlines() if "--overwrite" in ln)
+    assert "bool" not in overwrite.lower()
+    spacing = next(ln for ln in proc.stdout.splitlines() if "--spacing" in ln)
+    assert "<str>" in spacing or "TEXT" in spacing

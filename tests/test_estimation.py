@@ -656,7 +656,7 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     out = subprocess.run(cli + ["score", str(pred), str(folder / "truth")], capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0, out.stderr
-    summary = json.loads((pred / "score" / "score.json").read_text())["summary"]
+    summary = json.loads((pred / "score" / "scores.json").read_text())["summary"]
     assert (pred / "score" / "overlays.png").is_file()      # Fig. 4
     # a floor, not the target: the predicted sections overlap the truth
     assert summary["validation"]["dsc"]["mean"] > 0.7
@@ -668,7 +668,7 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
                                 "-o", str(tmp_path / "score_peers")], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "of every predictor:" in " ".join((out.stdout + out.stderr).split())
-    peers = json.loads((tmp_path / "score_peers" / "score.json").read_text())["peers"]
+    peers = json.loads((tmp_path / "score_peers" / "scores.json").read_text())["peers"]
     assert set(peers["peers"]) == {"no_motion", "kalman", "drive_static", "drive_lagged"}
     # holding still is the last training frame's tracked mask, scored here independently
     tracked_last = read_frame_masks(cal / "observation")[max(train)]

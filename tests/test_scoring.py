@@ -55,9 +55,9 @@ def test_score_cli_writes_table_and_refuses_to_overwrite(tmp_path):
     cmd = [sys.executable, "-m", "hifumotion", "score", str(pred), str(truth), "--spacing", "0.5"]
     out = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert out.returncode == 0, out.stderr
-    data = json.loads((pred / "score" / "score.json").read_text())
+    data = json.loads((pred / "score" / "scores.json").read_text())
     assert data["summary"]["training"]["centroid_error_mm"]["mean"] == pytest.approx(1.0, abs=0.02)
-    assert (pred / "score" / "score.csv").read_text().startswith("frame,set,dsc")
+    assert (pred / "score" / "table4.csv").read_text().startswith("frame,set,dsc")
     again = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert again.returncode == 2 and "Traceback" not in again.stderr
     # its output folder the prediction it scores: refused even with --overwrite, nothing lost

@@ -13,6 +13,26 @@ import typer
 from hifumotion import __version__, console
 from hifumotion.errors import InputError
 
+def _flags_shown_as_flags() -> None:
+    """Typer's rich help prints a type beside every flag (``--overwrite <bool>``), as if it took
+    a value; a flag takes none, so none is printed (versions without the hook are left as they are)."""
+    from typer.core import TyperOption
+
+    shown = getattr(TyperOption, "display_type_rich", None)
+    if shown is None or getattr(shown, "_flag_aware", False):
+        return
+
+    def display_type_rich(self, ctx):
+        if getattr(self, "is_flag", False) and self.metavar is None:
+            return None
+        return shown(self, ctx)
+
+    display_type_rich._flag_aware = True
+    TyperOption.display_type_rich = display_type_rich
+
+
+_flags_shown_as_flags()
+
 app = typer.Typer(
     name="hifumotion",
     help="Model and predict the movement and deformation of a HIFU target tissue.",

@@ -16,7 +16,7 @@ from hifumotion.errors import InputError
 def score(
     prediction_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png predicted masks (0/255)."),
     truth_dir: Path = typer.Argument(..., help="Folder with frames/frame_NNNN.png true masks (an experiment's truth/)."),
-    output: Optional[Path] = typer.Option(None, "--output", "-o", help="New folder for score.csv and score.json (default PREDICTION_DIR/score)."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="New folder for table4.csv and scores.json (the names a run gives them) (default PREDICTION_DIR/score)."),
     spacing: Optional[float] = typer.Option(None, "--spacing", callback=pixel_size, help="Pixel size in mm (default: the truth's parameters.json)."),
     images: Optional[Path] = typer.Option(None, "--images", help="The observed frames (frame_NNNN.png) for the overlays (default: TRUTH_DIR/../observed/frames if present)."),
     calibration: Optional[Path] = typer.Option(None, "--calibration", help="The calibration folder the prediction came from: its tracked frames, training frames and the push's program (the observed setup.json) put the predictors that know the same inputs beside it (holding still, Kalman, the drive surrogates)."),
@@ -49,8 +49,8 @@ def score(
         raise InputError("none of the scored frames is here as frame_NNNN.png to draw the overlays on", images)
     out_dir = output if output is not None else prediction_dir / "score"
     with output_folder(out_dir, overwrite, inputs=(prediction_dir, truth_dir, images, calibration)) as out:
-        write_text(out / "score.csv", table.to_csv())
-        write_json(out / "score.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows,
+        write_text(out / "table4.csv", table.to_csv())
+        write_json(out / "scores.json", {"pixel_mm": pixel, "summary": table.summary(), "frames": table.rows,
                                         **({"peers": peers} if peers is not None else {})})
         if frames_dir.is_dir():
             from hifumotion.io.raster import read_raster_array
