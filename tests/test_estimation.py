@@ -934,3 +934,24 @@ def test_model_settings_pick_one_of_the_forward_models_and_keep_their_own_settin
         ModelSettings(creep={"tolerence": 0.01})
     with pytest.raises(InputError, match="reduced_span"):
         ModelSettings(reduced_span=(2.0, 0.5))
+
+
+def test_a_fit_stopped_at_its_budget_or_refuted_by_its_check_reports_nothing_as_determined():
+    """The standard errors of a search that stopped at its evaluation budget, or of a reduced
+    model the full model's check refuted, do not say how well the data fix a parameter: no value
+    is reported as determined, and the reason is given."""
+    from hifumotion.estimation.calibrate import Calibration
+    from hifumotion.estimation.fit import FitResult
+    from hifumotion.estimation.model import Parameters
+
+    names = ("log_E", "nu", "log_beta1", "beta2")
+    search = FitResult(np.zeros(4), np.zeros((2, 3)), "least_squares", 8, 40, [], "`ftol` termination", True)
+    cal = Calibration(Parameters(), {n: 0.01 for n in names}, {n: True for n in names}, [20], search, None, {}, [],
+                      [], None, None, None, 40)
+    assert cal.caveats() == [] and cal.report()["poisson_ratio"]["determined"]
+    search.converged, search.message = False, "The maximum number of function evaluations is exceeded."
+    assert "budget" in cal.caveats()[0]
+    assert not any(entry["determined"] for entry in cal.report().values())
+    search.converged = True
+    cal.mapped = {"full_model_check": {"agrees": False, "cost_full_model_mm": 30.0, "cost_reduced_model_mm": 10.0}}
+    assert "3.00×" in cal.caveats()[0] and not cal.report()["beta2"]["determined"]

@@ -82,6 +82,8 @@ def calibrate(
         console.print(f"on {rc['particles'][1]} particles the fit's points A move {rc['largest_mm']:.2f} mm from where "
                       f"{rc['particles'][0]} put them: {'resolved' if rc['resolved'] else 'NOT resolved'} "
                       f"(a pixel is {rc['pixel_mm']:.2f} mm)", highlight=False)
+    for caveat in summary["fit"].get("caveats", []):
+        console.print(f"not to be trusted as determined: {caveat}", highlight=False)
     undetermined = [n for n, v in p.items() if not v["determined"]]
     if undetermined:
         console.print(f"not determined by these frames: {', '.join(undetermined)}", highlight=False)

@@ -91,8 +91,28 @@ class Calibration:
     summary: dict | None = None     # parameters.json, once written
     resolution: dict | None = None  # the fit on twice the particles (CalibrationSettings.resolution_check)
 
+    def caveats(self) -> list[str]:
+        """Why the fit's uncertainties are not to be read as those of a converged fit: the search
+        stopped at its budget of evaluations (its Jacobian and residuals are of a point on the
+        way, not of a minimum), or the full model's check at the fit disagreed with the model the
+        search ran on. One sentence each; empty when neither holds."""
+        out = []
+        if self.search is not None and not self.search.converged:
+            out.append(f"the search stopped at its budget of evaluations ({self.search.message.strip() or 'no message'}) "
+                       "before it converged: its uncertainties are of a point on the way, not of a minimum")
+        check = (self.mapped or {}).get("full_model_check")
+        if check is not None and not check.get("agrees", True):
+            ratio = check["cost_full_model_mm"] / max(check["cost_reduced_model_mm"], 1e-12)
+            out.append(f"the full model's training cost at the fit is {ratio:.2f}× the reduced model's: the model "
+                       "the search ran on does not hold there")
+        return out
+
     def report(self) -> dict:
-        """Values with uncertainties and what is identifiable, as written to ``parameters.json``."""
+        """Values with uncertainties and what is identifiable, as written to ``parameters.json``.
+
+        Where :meth:`caveats` lists a reason, no value is reported as determined: a standard
+        error from a search that did not converge, or from a model the check refuted, is no
+        measure of how well the data fix a parameter."""
         k = self.parameters
         rel = {n: float(s) for n, s in self.std.items()}
         e_std = k.youngs_modulus_pa * rel["log_E"]
@@ -120,6 +140,11 @@ class Calibration:
         for entry in out.values():   # an error no data bound is "unknown", not a number
             if entry["std"] is not None and not np.isfinite(entry["std"]):
                 entry["std"] = None
+        if self.caveats():
+            for entry in out.values():
+                if entry["determined"]:
+                    entry["determined"] = False
+                    entry["not_determined_because"] = "the fit's caveats (fit.caveats)"
         return out
 
 

@@ -123,6 +123,8 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
             "correlation": {"coordinates": ["log_E", "nu", "log_beta1", "beta2"], "matrix": cal.correlation},
             "runs": cal.runs,
             "failed_runs": cal.failed_runs,
+            "converged": cal.search.converged if cal.search is not None else None,
+            "caveats": cal.caveats(),
         },
         "observation": {"contours": obs.contour_source, "sweep_planes_with_tissue": int(obs.sweep.present.sum()),
                         "reconstructed_volume_mm3": rec.volume_mm3, "notes": obs.sweep.notes + rec.notes},

@@ -136,6 +136,9 @@ def _parameter_parts(outcome) -> list[str]:
         "'—' as an error: the data do not bound that direction. A standard error says how closely the "
         "training frames pin the model's parameters; it does not include the model's own error (the "
         "reconstructed geometry, the particle resolution), which can be larger."))
+    caveats = cal.caveats()
+    if caveats:
+        parts.append(paragraph("No parameter is reported as determined by the data: " + "; ".join(caveats) + "."))
     if cal.degeneracy:
         rows = [[f"×{d['factor']:g}", d["cost_mm"]] for d in cal.degeneracy]
         if rows:
