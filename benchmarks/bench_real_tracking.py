@@ -22,6 +22,9 @@ and milliseconds per frame (one process; the host's speed drifts, compare ratios
     python benchmarks/bench_real_tracking.py --quick          # six clips, a minute or two
     python benchmarks/bench_real_tracking.py                  # all 22 clips
 
+Also printed: ``label_noise``, how far one point's human labels differ between keyframes at most
+two frames apart — the floor under any tracker's error here.
+
 Targets (on the development set and on kept-back recordings alike): landmarks ≤ ½ of holding
 still's mean error and below LK's on every clip; tongue points' line distance ≤ ½ of holding
 still's, their point error below holding still's and LK's; drift ≤ 1.3; ≤ 10 ms a frame.
@@ -142,6 +145,24 @@ def score_clip(clip: Clip, tracker) -> dict:
             "ms_per_frame": 1e3 * seconds / max(len(path) - 1, 1)}
 
 
+def label_noise(clips: list[Clip], within_frames: int = 2) -> dict:
+    """How far the human labels of one point differ between keyframes at most ``within_frames``
+    apart (≤ 25–60 ms here, where the tissue barely moves): the scatter of the labels themselves.
+    A tracker started on one label and scored on another cannot do better than about this."""
+    landmark, tongue = [], []
+    for clip in clips:
+        keys = clip.keyframes
+        for a, b in zip(keys[:-1], keys[1:]):
+            if b - a > within_frames:
+                continue
+            for name in set(clip.labels[a]) & set(clip.labels[b]):
+                d = float(np.hypot(*np.subtract(clip.labels[a][name], clip.labels[b][name])))
+                (landmark if name in LANDMARKS else tongue).append(d)
+    return {"within_frames": within_frames,
+            "landmarks_px": float(np.mean(landmark)) if landmark else None, "landmark_pairs": len(landmark),
+            "tongue_points_px": float(np.mean(tongue)) if tongue else None, "tongue_pairs": len(tongue)}
+
+
 def summarise(per_clip: dict, trackers: list[str]) -> dict:
     """Means over clips, and the issue's targets checked clip by clip for ``hifumotion``."""
     def mean_of(tr, key, field="mean"):
@@ -190,11 +211,13 @@ def main(argv=None) -> int:
         print(f"error: --trackers: unknown {unknown}; expected of {list(TRACKERS)}", file=sys.stderr)
         return 2
     per_clip = {}
-    for clip in load_clips(args.root, names):
+    clips = load_clips(args.root, names)
+    for clip in clips:
         per_clip[clip.name] = {tr: score_clip(clip, TRACKERS[tr]) for tr in trackers}
         row = {tr: round(per_clip[clip.name][tr]["all_px"], 2) for tr in trackers}
         print(f"{clip.name}: {row}", file=sys.stderr, flush=True)
-    print(json.dumps({"clips": per_clip, "summary": summarise(per_clip, trackers)}, indent=1))
+    print(json.dumps({"clips": per_clip, "summary": summarise(per_clip, trackers), "label_noise": label_noise(clips)},
+                     indent=1))
     return 0
 
 
