@@ -152,7 +152,20 @@ def online_horizons(online: dict, path: str | Path) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["mesh_picture", "dsc_per_frame", "centroid_error_per_frame", "aim_trajectory", "online_horizons", "online_figure"]
+__all__ = ["mesh_picture", "dsc_per_frame", "centroid_error_per_frame", "aim_trajectory", "online_horizons", "online_figure",
+           "latency_axis_ms"]
+
+
+def latency_axis_ms(latency_ms) -> tuple[float, int, float]:
+    """The range a latency histogram is drawn over, so one stall does not squeeze every other
+    frame into its first bar: up to the larger of the 99th percentile and 3 × the median (ms);
+    with the frames beyond it and the largest latency (ms), which the figure states."""
+    lat = np.asarray(latency_ms, float)
+    lat = lat[np.isfinite(lat)]
+    if lat.size == 0:
+        return 1.0, 0, float("nan")
+    upper = max(float(np.percentile(lat, 99)), 3.0 * float(np.median(lat)), 1e-3)
+    return upper, int((lat > upper).sum()), float(lat.max())
 
 
 def online_figure(result, path: str | Path, truth_mm: np.ndarray | None = None) -> Path:
@@ -184,7 +197,11 @@ def online_figure(result, path: str | Path, truth_mm: np.ndarray | None = None) 
     axes[1].set_xlabel("time (s)")
     axes[1].set_ylabel("push / calibrated push")
     axes[1].grid(alpha=0.3)
-    axes[2].hist(result.latency_ms, bins=30, color=COLOURS["physics"])
+    upper, beyond, largest = latency_axis_ms(result.latency_ms)
+    axes[2].hist(np.clip(result.latency_ms, 0, upper), bins=30, range=(0, upper), color=COLOURS["physics"])
+    if beyond:
+        axes[2].set_title(f"{beyond} frame{'s' if beyond > 1 else ''} beyond {upper:.0f} ms (longest "
+                          f"{largest:.0f} ms), drawn in the last bar", fontsize=8)
     axes[2].set_xlabel("latency a frame, tracking included (ms)")
     axes[2].set_ylabel("frames")
     axes[2].grid(alpha=0.3)
