@@ -256,3 +256,22 @@ def test_flags_are_shown_as_flags_in_the_help():
     assert "bool" not in overwrite.lower()
     spacing = next(ln for ln in proc.stdout.splitlines() if "--spacing" in ln)
     assert "<str>" in spacing or "TEXT" in spacing
+
+
+def test_long_work_prints_progress_lines_when_standard_error_is_not_a_terminal(capsys, monkeypatch):
+    """A bar cannot redraw in a log file: a long stage prints a plain line now and then, and one
+    when done; work shorter than the interval prints nothing (a refusal stays one line)."""
+    import time
+
+    from hifumotion import console as out
+
+    monkeypatch.setattr(out.ProgressLines, "INTERVAL_S", 0.05)
+    for _ in out.track(range(4), "frames"):
+        time.sleep(0.03)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].startswith("frames: ") and "/4)" in lines[0] and lines[-1].startswith("frames: 100 %, done in")
+    monkeypatch.setattr(out.ProgressLines, "INTERVAL_S", 60.0)
+    with out.progress_fraction("simulate") as update:
+        update(0.5)
+        update(1.0)
+    assert capsys.readouterr().err == ""

@@ -30,10 +30,52 @@ def setup(verbosity: int = 0, quiet: bool = False) -> None:
     log.propagate = False
 
 
+class ProgressLines:
+    """Progress as plain lines, for standard error that is not a terminal (a log file, CI, ``make``),
+    where a bar cannot redraw: one line at most every :attr:`INTERVAL_S` seconds, so a long stage
+    is not silent for minutes, and none for work that ends sooner (a refusal stays one line)."""
+
+    INTERVAL_S = 10.0
+
+    def __init__(self, description: str):
+        import time
+
+        self.description = description
+        self.start = self.last = time.monotonic()
+        self.printed = False
+
+    def __call__(self, fraction: float, done: int | None = None, total: int | None = None) -> None:
+        import time
+
+        now = time.monotonic()
+        if _quiet or now - self.last < self.INTERVAL_S:
+            return
+        self.last, self.printed = now, True
+        count = f" ({done}/{total})" if done is not None and total else ""
+        console.print(f"{self.description}: {100 * min(max(fraction, 0.0), 1.0):.0f} %{count}, "
+                      f"{now - self.start:.0f} s", highlight=False, markup=False, soft_wrap=True)
+
+    def finish(self) -> None:
+        import time
+
+        if self.printed and not _quiet:
+            console.print(f"{self.description}: 100 %, done in {time.monotonic() - self.start:.0f} s", highlight=False,
+                          markup=False, soft_wrap=True)
+
+
 def track(items: Iterable[T], description: str, total: int | None = None) -> Iterator[T]:
-    """Iterate with a progress bar on standard error (none with ``-q`` or when not a terminal)."""
-    if _quiet or not console.is_terminal:
+    """Iterate with a progress bar on standard error (none with ``-q``; plain lines,
+    :class:`ProgressLines`, when standard error is not a terminal)."""
+    if _quiet:
         yield from items
+        return
+    if not console.is_terminal:
+        n = total if total is not None else (len(items) if hasattr(items, "__len__") else None)
+        lines = ProgressLines(description)
+        for i, item in enumerate(items):
+            yield item
+            lines((i + 1) / n if n else 0.0, i + 1, n)
+        lines.finish()
         return
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with Progress(*columns, console=console, transient=False) as progress:
@@ -50,8 +92,11 @@ class _Fraction:
         self.description = description
         self.progress: Progress | None = None
         self.task = None
+        self.lines: ProgressLines | None = None
 
     def __enter__(self):
+        if not _quiet and not console.is_terminal:
+            self.lines = ProgressLines(self.description)
         if not _quiet and console.is_terminal:
             self.progress = Progress(TextColumn("{task.description}"), BarColumn(),
                                      TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
@@ -63,10 +108,14 @@ class _Fraction:
     def __call__(self, fraction: float) -> None:
         if self.progress is not None:
             self.progress.update(self.task, completed=min(max(fraction, 0.0), 1.0))
+        if self.lines is not None:
+            self.lines(fraction)
 
     def __exit__(self, *exc):
         if self.progress is not None:
             self.progress.__exit__(*exc)
+        if self.lines is not None and exc[0] is None:
+            self.lines.finish()
         return False
 
 
