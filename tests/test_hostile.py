@@ -193,6 +193,9 @@ def build_scratch(root: Path) -> Path:
         ds = pydicom.dcmread(root / name)
         ds.NumberOfFrames = declared
         ds.save_as(root / name)
+    (root / "observed_setup_folder" / "setup.json").mkdir(parents=True)       # setup.json a folder
+    (root / "observed_setup_fifo").mkdir()
+    os.mkfifo(root / "observed_setup_fifo" / "setup.json")                   # … or a FIFO
     bad_setup = root / "observed_bad"
     bad_setup.mkdir()
     (bad_setup / "setup.json").write_text("{ broken")
@@ -344,6 +347,8 @@ CASES = [
     (["track", "good.nii.gz", "--init", "mask40.png", "--bar", "small_mask.png", "-o", "out"], "small_mask.png"),
     (["track", "good.nii.gz", "--init", "mask40.png", "--setup", "observed_bad/setup.json", "-o", "out"], "setup.json"),
     (["track", "observed_field", "-o", "out"], "setup.json"),
+    *[([command, f"observed_setup_{kind}", "-o", "out"], "setup.json")
+      for command in ("track", "calibrate") for kind in ("folder", "fifo")],
     # hifumotion track --points: the points file's faults, each named with the file
     *[(["track", "good.nii.gz", "--points", f"points_{kind}.csv", "-o", "out"], f"points_{kind}.csv")
       for kind in ("outside", "negative", "nan", "word", "twice", "short", "header", "columns", "many")],
@@ -425,6 +430,13 @@ CASES = [
     # images no machine holds: refused before the physics runs, naming the imaging settings
     (["experiment", "--preset", "small", "--set", "imaging.pixel_mm=0.0001", "-o", "out"], "imaging"),
     (["experiment", "--preset", "small", "--set", "imaging.width_mm=1000000", "-o", "out"], "imaging"),
+    (["experiment", "--preset", "small", "--set", "imaging.sweep_gap_mm=1e-300", "-o", "out"], "sweep_gap_mm"),
+    # values no probe, clinician or bar has (each was simulated, or ran for ever, or a pydantic traceback)
+    *[(["experiment", "--preset", "small", "--set", f"{key}={value}", "-o", "out"], key.split(".")[-1])
+      for key, value in (("imaging.frame_rate_hz", "1e-300"), ("imaging.frame_rate_hz", "1e300"),
+                         ("imaging.frame_rate_hz", "0.001"), ("imaging.dynamic_range_db", "1e300"),
+                         ("imaging.center_frequency_mhz", "1e300"), ("clinician.error_mm", "1e300"),
+                         ("bar.force_n", "1e300"))],
     (["experiment", "--preset", "small"], "--output"),
     # hifumotion calibrate / predict / score
     (["calibrate", "ph", "-o", "out"], "setup.json"),

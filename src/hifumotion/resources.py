@@ -59,7 +59,9 @@ def format_bytes(n: float) -> str:
     """``1.5 GB``-style text (powers of 1024)."""
     for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
         if abs(n) < 1024 or unit == "PB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+            if unit == "B":
+                return f"{n:.0f} {unit}"
+            return f"{n:.1f} {unit}" if abs(n) < 1e6 else f"{n:.3g} {unit}"   # 10³⁰⁰ PB in a few digits
         n /= 1024.0
     return f"{n:.1f} PB"
 

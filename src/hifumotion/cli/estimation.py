@@ -174,9 +174,11 @@ def online(
     if watch and pace:
         raise InputError("--pace replays a recorded cine; --watch takes frames as they are written: give one", "--pace")
     spec, k, reference, meta = load_calibration(calibration_dir)
-    if not (observed_dir / "setup.json").is_file():
+    from hifumotion.io.files import require_regular_file
+
+    if not (observed_dir / "setup.json").exists() and not (observed_dir / "setup.json").is_symlink():
         raise InputError("not an observed experiment folder (no setup.json)", observed_dir)
-    setup = read_setup(observed_dir / "setup.json")
+    setup = read_setup(require_regular_file(observed_dir / "setup.json", "setup.json"))
     try:
         ahead = sorted({int(h) for h in horizons.split(",") if h.strip()})
     except ValueError:

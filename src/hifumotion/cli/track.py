@@ -81,6 +81,10 @@ def track(
     if estimator.lower() not in ESTIMATORS:
         raise InputError(f"unknown estimator {estimator!r}; expected one of {', '.join(ESTIMATORS)}", "--estimator")
     cine = source
+    if source.is_dir() and ((source / "setup.json").exists() or (source / "setup.json").is_symlink()):
+        from hifumotion.io.files import require_regular_file
+
+        require_regular_file(source / "setup.json", "setup.json")   # a folder or a FIFO of that name: said
     if source.is_dir() and (source / "setup.json").is_file():      # an observed/ folder
         # read as calibrate reads it (frames/ by number, frames.nii.gz checked against them,
         # setup.json's pixel size and frame interval), so both follow the same images

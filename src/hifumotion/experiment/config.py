@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
@@ -51,29 +51,42 @@ class ResolutionConfig(ConfigModel):
     support_factor: float = Field(2.0, ge=1.5, le=3.0, description="kernel support radius h in particle spacings")
 
 
+#: Longest cine a twin simulates (s).
+MAX_CINE_S = 600.0
+
+
 class ImagingConfig(ConfigModel):
     frames: int = Field(200, ge=2, le=MAX_FRAMES, description="number of B-mode frames of the imaging plane while the bar pushes")
-    frame_rate_hz: float = Field(20.0, gt=0, description="imaging frame rate in Hz (frame interval = 1/rate s)")
+    frame_rate_hz: float = Field(20.0, ge=1e-3, le=1e4, description="imaging frame rate in Hz (frame interval = 1/rate s; 0.001 … 10,000 Hz)")
     pixel_mm: float = Field(0.2, gt=0, description="pixel size of every image in mm (square pixels)")
     width_mm: float = Field(44.0, gt=0, description="lateral extent of the images in mm")
     depth_mm: float = Field(40.0, gt=0, description="depth extent of the images in mm, from the probe's face")
     probe_standoff_mm: float = Field(8.0, ge=0, description="water path from the probe face (below the tank's membrane floor, looking up) to the floor in mm")
     sweep_gap_mm: float = Field(1.0, gt=0, description="distance between the parallel planes of the spatial sweep in mm")
     sweep_margin_mm: float = Field(2.0, ge=0, description="the sweep starts and ends this far beyond the tissue in mm")
-    center_frequency_mhz: float = Field(3.5, gt=0, description="centre frequency of the imaging probe in MHz")
+    center_frequency_mhz: float = Field(3.5, gt=0, le=100, description="centre frequency of the imaging probe in MHz (at most 100)")
     axial_fwhm_mm: float = Field(0.45, gt=0, description="axial resolution (FWHM of the pulse-echo envelope) in mm")
     lateral_fwhm_mm: float = Field(1.1, gt=0, description="lateral resolution at the focus (FWHM) in mm")
-    dynamic_range_db: float = Field(50.0, gt=0, description="log-compression dynamic range in dB")
+    dynamic_range_db: float = Field(50.0, gt=0, le=200, description="log-compression dynamic range in dB (at most 200)")
     tissue_echogenicity: float = Field(1.0, gt=0, description="backscatter power of the tissue (relative)")
     echo_texture: float = Field(0.35, ge=0, lt=1, description="relative variation of the tissue's backscatter (smooth, 1.5 mm scale)")
     water_echogenicity: float = Field(1e-4, ge=0, description="backscatter power of the water (relative; degassed water is nearly anechoic, −40 dB)")
     floor_echogenicity: float = Field(5.0, ge=0, description="backscatter power of the tank's membrane floor (relative)")
     bar_echogenicity: float = Field(30.0, ge=0, description="backscatter power of the metal bar (relative)")
 
+    @model_validator(mode="after")
+    def _a_cine_of_minutes(self):
+        # the twin simulates the whole cine; a quasi-static push over more than ten minutes is not
+        # this tool's experiment, and its physics would run for hours before anyone saw a frame
+        span = (self.frames - 1) / self.frame_rate_hz
+        if span > MAX_CINE_S:
+            raise ValueError(f"frames / frame_rate_hz make a cine of {span:.3g} s; at most {MAX_CINE_S:g} s")
+        return self
+
 
 class ClinicianConfig(ConfigModel):
     points: int = Field(16, ge=4, description="points a clinician clicks around the tissue on the first frame")
-    error_mm: float = Field(0.6, ge=0, description="standard deviation of each click's distance from the true boundary in mm")
+    error_mm: float = Field(0.6, ge=0, le=10, description="standard deviation of each click's distance from the true boundary in mm (at most 10)")
 
 
 class TwinRunConfig(ConfigModel):

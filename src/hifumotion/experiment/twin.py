@@ -332,8 +332,12 @@ def check_image_memory(cfg: TwinConfig) -> None:
     rows, cols = im_cfg.depth_mm / im_cfg.pixel_mm, im_cfg.width_mm / im_cfg.pixel_mm
     planes = im_cfg.frames + cfg.tank.size_mm[2] / im_cfg.sweep_gap_mm + 1
     need = rows * cols * (6.0 * planes + 20 * 8.0)
-    check_memory(need, f"images of {rows:,.0f} × {cols:,.0f} px ({im_cfg.depth_mm:g} × {im_cfg.width_mm:g} mm at "
-                 f"{im_cfg.pixel_mm:g} mm), {planes:,.0f} of them,", "imaging (pixel_mm, width_mm, depth_mm, frames)")
+    def count(x: float) -> str:
+        return f"{x:,.0f}" if x < 1e9 else f"{x:.3g}"
+
+    check_memory(need, f"images of {count(rows)} × {count(cols)} px ({im_cfg.depth_mm:g} × {im_cfg.width_mm:g} mm at "
+                 f"{im_cfg.pixel_mm:g} mm), {count(planes)} of them,",
+                 "imaging (pixel_mm, width_mm, depth_mm, frames, sweep_gap_mm)")
 
 
 def generate_twin(cfg: TwinConfig, folder: str | Path, progress: Progress | None = None) -> TwinResult:

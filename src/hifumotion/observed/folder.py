@@ -121,8 +121,9 @@ def load_observed(folder: str | Path) -> Observed:
     if not root.is_dir():
         raise InputError("no such folder (expected an observed experiment: setup.json, sweep/, frames/)", root)
     setup_path = root / "setup.json"
-    if not setup_path.is_file():
+    if not setup_path.exists() and not setup_path.is_symlink():
         raise InputError("not an observed experiment folder (no setup.json)", root)
+    require_regular_file(setup_path, "setup.json")     # a folder or a FIFO of that name: said as such
     setup = read_setup(setup_path)
     shape = setup.imaging.image_shape
     sweep = _stack(root / "sweep", "slice_", shape)

@@ -101,6 +101,11 @@ class TissueConfig(TissueMaterial):
         return self
 
 
+#: Largest push a scene takes (N): a hand-held bar on a tissue sample, with room to spare
+#: (a push of 10³⁰⁰ N ran until the tissue left the tank, with NumPy's overflow warnings).
+MAX_FORCE_N = 1000.0
+
+
 class BarConfig(ConfigModel):
     enabled: bool = Field(True, description="whether there is a pushing bar")
     radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar (its flat pushing end) in mm")
@@ -111,8 +116,8 @@ class BarConfig(ConfigModel):
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
     weight_supported: bool = Field(True, description="the hand holding the bar carries its weight, so the push on the tissue is force_n alone")
     control: Literal["force", "travel"] = Field("force", description="what drives the bar: force (it pushes with force_n or schedule_force_n, and how far it goes is a result) or travel (its end is driven along its axis by travel_mm or schedule_travel_mm from where it rests on the settled tissue, and the force it takes is a result)")
-    force_n: float = Field(paper.FORCE_N, ge=0, description="pushing force held after the ramp, in N (Table 3: 0.25); the bar pushes, it does not pull")
-    travel_mm: float = Field(0.0, ge=0, description="travel control: how far the bar's end is driven along its axis by the end of the ramp, in mm, from where it rests on the settled tissue")
+    force_n: float = Field(paper.FORCE_N, ge=0, le=MAX_FORCE_N, description="pushing force held after the ramp, in N (Table 3: 0.25; at most 1,000); the bar pushes, it does not pull")
+    travel_mm: float = Field(0.0, ge=0, le=1000.0, description="travel control: how far the bar's end is driven along its axis by the end of the ramp, in mm, from where it rests on the settled tissue")
     ramp_s: float = Field(0.2, ge=0, description="time over which the force (travel control: the travel) rises linearly from 0, in s")
     schedule_times_s: list[float] | None = Field(None, description="explicit schedule: times in s (overrides force_n or travel_mm, and ramp_s)")
     schedule_force_n: list[float] | None = Field(None, description="explicit force schedule: forces in N at schedule_times_s")
@@ -131,6 +136,9 @@ class BarConfig(ConfigModel):
             piecewise_linear_schedule(self.schedule_times_s, values)
             if any(not (f >= 0) for f in values):
                 raise ValueError(f"{name}: the bar pushes, it does not pull; values must be ≥ 0")
+            top = MAX_FORCE_N if self.control == "force" else 1000.0
+            if any(f > top for f in values):
+                raise ValueError(f"{name}: values must be at most {top:g} ({'N' if self.control == 'force' else 'mm'})")
         if np.linalg.norm(self.direction) == 0:
             raise ValueError("direction must not be zero")
         if self.edge_radius_mm > self.radius_mm:
