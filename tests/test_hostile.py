@@ -116,6 +116,8 @@ def build_scratch(root: Path) -> Path:
     (root / "run_key.toml").write_text(_run_config(extra="\n[estimation]\nparticels = 300\n"))
     (root / "run_particles.toml").write_text(_run_config(extra="\n[estimation]\nparticles = 1000000000\n"))
     (root / "run_horizons.toml").write_text(_run_config(extra="\n[estimation]\nhorizons_frames = [-4, 0]\n"))
+    (root / "run_force.toml").write_text(_run_config(extra="\n[estimation]\nforce_n = 1e300\n"))
+    (root / "run_threshold.toml").write_text(_run_config(extra="\n[estimation]\nthreshold_mm_per_point = 1e300\n"))
     # nested thousands of levels (a RecursionError in any parser), a few hundred (past the parser)
     deep = "[" * 5000 + "]" * 5000
     (root / "deep_scene.toml").write_text(f"a = {deep}\n")
@@ -476,6 +478,8 @@ CASES = [
     (["run", "run_key.toml", "-o", "out"], "particels"),
     (["run", "run_particles.toml", "-o", "out"], "particles"),
     (["run", "run_horizons.toml", "-o", "out"], "horizons_frames"),
+    (["run", "run_force.toml", "-o", "out"], "force_n"),
+    (["run", "run_threshold.toml", "-o", "out"], "threshold_mm_per_point"),
     (["run", "fifo.png", "-o", "out"], "fifo.png"),
     # nesting thousands of levels deep, or a few hundred, in every structured file a command reads
     (["simulate", "deep_scene.toml", "-o", "out"], "deep_scene.toml"),

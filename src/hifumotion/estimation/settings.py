@@ -82,7 +82,7 @@ class CalibrationSettings(ConfigModel):
         "least_squares", description="estimator: bounded least squares, CMA-ES, or the paper's Table 1 algorithm")
     training_frames: str | list[int] | None = Field(
         None, description="training frames, '20,30,40', '20:101:10' or a list (default: the paper's protocol scaled to the series)")
-    force_n: float = Field(paper.FORCE_N, gt=0, description="nominal pushing force in N (the data fix only F/E)")
+    force_n: float = Field(paper.FORCE_N, ge=1e-6, le=1e3, description="nominal pushing force in N, 10⁻⁶ … 10³ (the data fix only F/E)")
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     search_integrator: Literal["implicit", "reduced"] = Field(
         "implicit", description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre from two full runs, again from every full run so far wherever a full run finds it off — at the design's best start and at a fit — then, if the final model is finer, the final model's own around the search's optimum; docs/decisions.md, issues 39 and 41)")
@@ -99,7 +99,7 @@ class CalibrationSettings(ConfigModel):
     max_evaluations: int = Field(8, ge=1, le=10_000, description="least squares: residual evaluations (each with a Jacobian)")
     cma_generations: int = Field(12, ge=1, le=10_000, description="CMA-ES: generations")
     threshold_mm_per_point: float | None = Field(
-        None, gt=0, description="Table 1's threshold T per contour point in mm (default: one pixel)")
+        None, gt=0, le=100.0, description="Table 1's threshold T per contour point in mm (default: one pixel; at most 100)")
     table1_max_runs: int = Field(120, ge=1, le=100_000, description="Table 1: most forward runs")
     space_mapping: bool = Field(True, description="implicit search: map the search model's fit to the final model (output space mapping)")
     mapping_runs: int = Field(3, ge=1, le=100, description="runs of the final model in the space mapping (each verified)")
