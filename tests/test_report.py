@@ -31,3 +31,18 @@ def test_the_report_says_where_holding_still_beats_the_online_filter():
     assert "tracked sections" in both
     never = online_against_holding(_loop({4: [0.4]}, {4: [0.3]}), np.zeros((3, 2)))
     assert never.startswith("Against the truth, holding still is as close as the filter or closer at every horizon")
+
+
+def test_the_true_push_is_drawn_as_a_multiple_of_what_the_calibration_saw():
+    """A push announced as a ramp and hold, raised 1.8× unannounced: over the announced shape and
+    relative to the last training frame, the true push is 1 until the change and 1.8 after it;
+    undefined before the push starts."""
+    from hifumotion.report.build import relative_push
+
+    t = np.arange(200) * 0.05
+    announced = np.minimum(t / 0.5, 1.0)
+    true = 0.45 * announced * np.where(t >= 6.6, 1.8, 1.0)
+    ratio = relative_push(true, announced, 100)
+    assert np.isnan(ratio[0])
+    np.testing.assert_allclose(ratio[1:132], 1.0)
+    np.testing.assert_allclose(ratio[132:], 1.8)

@@ -53,6 +53,7 @@ class ReportInputs:
     experiment_note: str = ""
     experiment_facts: dict = field(default_factory=dict)
     true_centroid_mm: np.ndarray | None = None     # (T, 2) the truth's section centroid per frame (twin)
+    true_push_scale: np.ndarray | None = None      # (T,) the true push over the announced program (twin): relative_push
     links: dict = field(default_factory=dict)      # label -> path of output files worth opening
 
 
@@ -228,6 +229,17 @@ def _nanmean(values: np.ndarray) -> float | None:
     return float(np.nanmean(values)) if np.isfinite(values).any() else None
 
 
+def relative_push(true_push: np.ndarray, program: np.ndarray, reference_frame: int) -> np.ndarray:
+    """The true push (force N or travel mm, per frame) over the announced program's shape, as a
+    multiple of that ratio at ``reference_frame`` (the last frame the calibration saw): what the
+    online filter's push scale estimates. NaN where the program is zero (before the push)."""
+    true_push, program = np.asarray(true_push, float), np.asarray(program, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(np.abs(program) > 1e-9 * np.abs(program).max(initial=0.0), true_push / program, np.nan)
+    seen = ratio[min(int(reference_frame), len(ratio) - 1)]
+    return ratio / seen if np.isfinite(seen) and seen != 0 else np.full(len(ratio), np.nan)
+
+
 def online_against_holding(result, truth_mm=None) -> str:
     """One sentence: at which horizons the online filter's centroid error (against the truth
     where known, else the tracking) is below holding still's, and at which it is not."""
@@ -282,7 +294,7 @@ def _online_loop_parts(result, inputs: ReportInputs, folder: Path) -> list[str]:
                   f"a frame). The push ends at {fmt(s['push_scale_last'], 3)} × the calibrated one "
                   f"(± {fmt(s['push_scale_std_last'], 2)}); the reduced model took "
                   f"{fmt(s['reduced_model_construction_s'], 3)} s to make."),
-        figure(figures.online_figure(result, folder / "online_loop.png", truth).name,
+        figure(figures.online_figure(result, folder / "online_loop.png", truth, inputs.true_push_scale).name,
                "Online loop: predicted, tracked and true centroid over time; the push's scale; latency a frame"),
     ]
 

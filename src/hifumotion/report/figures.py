@@ -168,10 +168,12 @@ def latency_axis_ms(latency_ms) -> tuple[float, int, float]:
     return upper, int((lat > upper).sum()), float(lat.max())
 
 
-def online_figure(result, path: str | Path, truth_mm: np.ndarray | None = None) -> Path:
+def online_figure(result, path: str | Path, truth_mm: np.ndarray | None = None,
+                  true_scale: np.ndarray | None = None) -> Path:
     """The online loop (:class:`~hifumotion.prediction.online.OnlineResult`): the predicted
     centroid at t + k (longest horizon) against the tracked (and the true, where known) one over
-    time, the push's estimated scale, and the histogram of each frame's latency."""
+    time, the push's estimated scale (and the true one, ``true_scale`` per frame, where known),
+    and the histogram of each frame's latency."""
     plt = _pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(12.0, 3.4))
     dt = result.frame_interval_s
@@ -194,6 +196,11 @@ def online_figure(result, path: str | Path, truth_mm: np.ndarray | None = None) 
     axes[1].plot(result.frames * dt, result.scale, color=COLOURS["physics"])
     axes[1].fill_between(result.frames * dt, result.scale - result.scale_std, result.scale + result.scale_std,
                          color=COLOURS["physics"], alpha=0.2)
+    if true_scale is not None:
+        t = np.asarray(true_scale, float)
+        axes[1].plot(np.arange(len(t)) * dt, t, color=COLOURS["truth"], ls="--", label="true")
+        axes[1].plot([], [], color=COLOURS["physics"], label="estimated")
+        axes[1].legend(fontsize=6)
     axes[1].set_xlabel("time (s)")
     axes[1].set_ylabel("push / calibrated push")
     axes[1].grid(alpha=0.3)

@@ -164,6 +164,7 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
                               "truth tissue particles": truth_params["facts"]["truth_tissue_particles"],
                               "true blob volume (mm³)": truth_params["facts"]["blob_volume_mm3"]},
             true_centroid_mm=np.asarray(motion["centroid_mm"], float),
+            true_push_scale=_true_push_scale(cfg, result.observed.setup, outcome.training),
             links=output_links(out, {"experiment/truth/particles/frames.pvd — the twin's particles (ParaView)":
                                      out / "experiment" / "truth" / "particles" / "frames.pvd"}))
         page = write_report(out / "report", outcome, truth, inputs)
@@ -172,6 +173,17 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
     summary["segmentation_mean_dsc"] = {r.title: {m: round(r.comparison.mean(m, "dsc"), 4) for m in methods}
                                         for r in segmentation}
     return summary
+
+
+def _true_push_scale(cfg, setup, training: list[int]) -> np.ndarray:
+    """The twin's true push over the program ``setup.json`` announced, per frame, as the online
+    filter's push scale estimates it (:func:`~hifumotion.report.build.relative_push`)."""
+    from hifumotion.report.build import relative_push
+
+    t = np.arange(setup.frames) * setup.frame_interval_s
+    bar = cfg.bar
+    drive = bar.travel_schedule() if bar.control == "travel" else bar.schedule()
+    return relative_push(np.array([drive(x) for x in t]), setup.program_at_frames(), max(training))
 
 
 def _items(tell: Progress, stage: str):
