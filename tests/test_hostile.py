@@ -355,6 +355,8 @@ CASES = [
     *[(["track", "good.nii.gz", "--points", f"points_{kind}.csv", "-o", "out"], f"points_{kind}.csv")
       for kind in ("outside", "negative", "nan", "word", "twice", "short", "header", "columns", "many")],
     (["track", "image.png", "--points", "points_ok.csv", "-o", "out"], "frame"),
+    (["track", "good.nii.gz", "--points", "points_ok.csv", "--fields", "-o", "out"], "--fields"),
+    (["track", "good.nii.gz", "--points", "points_ok.csv", "--bar", "mask40.png", "-o", "out"], "--bar"),
     (["track", "frame_masks", "--points", "points_mm.csv", "-o", "out"], "points_mm.csv"),
     (["calibrate", "observed_field", "--objective", "shape", "-o", "out"], "--objective"),
     (["calibrate", "observed_field", "--tracking", "magic", "-o", "out"], "--tracking"),

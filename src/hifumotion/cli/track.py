@@ -107,6 +107,10 @@ def track(
         raise InputError(f"has {seq.n_frames} frame; tracking needs a cine of at least 2", cine)
     require_frame_size(seq.shape, cine)
     if init is None:
+        # what a region needs is no use to points: said, not silently dropped
+        for name, given in (("--setup", setup), ("--exclude", exclude), ("--bar", bar), ("--fields", fields or None)):
+            if given is not None:
+                raise InputError("applies to a region followed from frame 0; give its --init as well", name)
         _track_points_only(seq, source, points, output, overwrite)
         return
     if not seq.spacing_known:

@@ -67,13 +67,13 @@ class PointTrack:
     seconds_per_frame
         Wall time of each frame (s); frame 0 is 0.
     names
-        The points' names, when they were given.
+        The points' names (``point_<i>`` where none were given).
     """
 
     positions_px: np.ndarray
     disagreement_px: np.ndarray
     seconds_per_frame: np.ndarray
-    names: tuple[str, ...] | None = None
+    names: tuple[str, ...] = ()
 
     @property
     def n_frames(self) -> int:
@@ -257,7 +257,7 @@ def track_points(frames, points_px, *, names=None, window_px: int = WINDOW_PX, l
     points_px
         ``(N, 2)`` (x, y) px of the points on frame 0 (column, row; pixel centres at integers).
     names
-        Optional names of the points (``N`` strings), kept with the track.
+        Names of the points (``N`` strings; default ``point_0`` …), kept with the track.
     window_px, levels
         :class:`PointTracker`'s.
     progress
@@ -275,10 +275,11 @@ def track_points(frames, points_px, *, names=None, window_px: int = WINDOW_PX, l
     if frames.ndim != 3 or frames.shape[0] < 1:
         raise InputError(f"expected frames (T, H, W), got shape {frames.shape}", "frames")
     tracker = PointTracker(frames[0], points_px, window_px=window_px, levels=levels)
-    if names is not None:
-        names = tuple(str(n) for n in names)
-        if len(names) != len(tracker.points):
-            raise InputError(f"expected {len(tracker.points)} names, got {len(names)}", "names")
+    if names is None:
+        names = tuple(f"point_{i}" for i in range(len(tracker.points)))
+    names = tuple(str(n) for n in names)
+    if len(names) != len(tracker.points):
+        raise InputError(f"expected {len(tracker.points)} names, got {len(names)}", "names")
     positions = [tracker.points.astype(float)]
     disagreement = [np.zeros(len(tracker.points))]
     seconds = [0.0]
