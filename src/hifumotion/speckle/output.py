@@ -106,8 +106,10 @@ def material_points_csv(points: dict[str, np.ndarray], spacing_mm) -> str:
     rest_mm = points["rest_px"] * np.array([col, row])
     d = points["displacement_mm"]
     last = d[-1]
-    with np.errstate(invalid="ignore"):
-        largest = np.nanmax(np.linalg.norm(d, axis=2), axis=0) if np.isfinite(d).any() else np.full(len(rest_mm), np.nan)
+    norms = np.linalg.norm(d, axis=2)
+    seen = np.isfinite(norms).any(axis=0)          # a point on a solid has no displacement at all
+    largest = np.full(len(rest_mm), np.nan)
+    largest[seen] = np.nanmax(norms[:, seen], axis=0)
     quality = points["quality"].mean(axis=0)
 
     def num(v, digits):
