@@ -146,3 +146,21 @@ def test_track_points_from_the_command_line(tmp_path, scatterers):
                           "-o", str(tmp_path / "bad")], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "points.csv" in bad.stderr and "outside" in bad.stderr
     assert "Traceback" not in bad.stderr and not (tmp_path / "bad").exists()
+
+
+def test_a_contours_vertices_are_points_to_follow(tmp_path):
+    """A contour CSV as the project writes it (frame, point, x_px, y_px, x_mm, y_mm) gives its
+    vertices as points; one holding several frames is refused, naming the file."""
+    from hifumotion.contour import Contour
+    from hifumotion.io import write_contours_csv
+
+    square = np.array([[10.0, 10.0], [30.0, 10.0], [30.0, 30.0], [10.0, 30.0]])
+    one = tmp_path / "one.csv"
+    write_contours_csv(one, {0: Contour(square, (0.2, 0.2))})
+    xy, names = read_points_csv(one, 0.2)
+    np.testing.assert_allclose(xy, square)
+    assert len(set(names)) == 4
+    two = tmp_path / "two.csv"
+    write_contours_csv(two, {0: Contour(square, (0.2, 0.2)), 5: Contour(square + 1, (0.2, 0.2))})
+    with pytest.raises(InputError, match="frames 0, 5"):
+        read_points_csv(two, 0.2)

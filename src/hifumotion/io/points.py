@@ -5,6 +5,9 @@ Input, one row a point, on frame 0::
     name,x_px,y_px            (or x_mm,y_mm with a known pixel size; name optional)
     hyoid,133.2,99.2
 
+A contour CSV of one frame (``frame, point, x_px, y_px, …``, as ``segment`` and ``track`` write
+it) is read the same way: its vertices become the points.
+
 Output (``points.csv``), one row a point and frame; x is the column, y the row, origin at
 the top-left pixel's centre as in the contour CSVs::
 
@@ -70,6 +73,12 @@ def read_points_csv(path: str | Path, spacing_mm=None) -> tuple[np.ndarray, tupl
         points.append((x, y) if use_px else (x / col_mm, y / row_mm))
         name = (r.get("name") or "").strip()
         names.append(name or f"point_{line - 2}")
+    if "frame" in cols:
+        # a contour CSV (frame, point, x_px, y_px, …): its vertices are points of one frame
+        frames = sorted({(r.get("frame") or "").strip() for r in rows})
+        if len(frames) > 1:
+            raise InputError(f"holds points of frames {', '.join(frames[:4])}{' …' if len(frames) > 4 else ''}; "
+                             "give those of frame 0 only", p)
     if len(set(names)) != len(names):
         twice = sorted({n for n in names if names.count(n) > 1})
         raise InputError(f"names a point more than once: {', '.join(twice[:5])}", p)
