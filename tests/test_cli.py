@@ -275,3 +275,23 @@ def test_long_work_prints_progress_lines_when_standard_error_is_not_a_terminal(c
         update(0.5)
         update(1.0)
     assert capsys.readouterr().err == ""
+
+
+def test_calibrate_options_leave_the_settings_defaults_to_the_settings():
+    """Each option of ``calibrate`` that is also an ``[estimation]`` setting defaults to "not
+    given", so the setting's own default applies (one home for each default): an option with a
+    default of its own would silently override ``--set`` files' and the class's."""
+    import typer
+
+    from hifumotion.cli import _register_commands
+    from hifumotion.cli.app import app
+    from hifumotion.workflow.pipeline import EstimationConfig
+
+    _register_commands()
+    command = typer.main.get_command(app).commands["calibrate"]
+    fields = set(EstimationConfig.model_fields) | {"particles"}
+    aliases = {"force": "force_n", "boundary_offset": "boundary_offset_mm"}
+    settings_options = [p for p in command.params
+                        if p.param_type_name == "option" and aliases.get(p.name, p.name) in fields]
+    assert len(settings_options) >= 8
+    assert {p.name: p.default for p in settings_options if p.default is not None} == {}

@@ -10,25 +10,24 @@ import typer
 from hifumotion.cli.app import app, positive
 from hifumotion.console import console
 from hifumotion.errors import InputError
-from hifumotion import paper
 
 
 @app.command()
 def calibrate(
     observed_dir: Path = typer.Argument(..., help="An observed experiment folder (setup.json, sweep/, frames/, initial_contour.csv)."),
     output: Path = typer.Option(..., "--output", "-o", help="New calibration folder."),
-    method: str = typer.Option("least_squares", "--method", help="least_squares (default), cmaes, or table1 (the paper's iterative algorithm)."),
+    method: Optional[str] = typer.Option(None, "--method", help="least_squares, cmaes, or table1 (the paper's iterative algorithm). Default: the setting's (least_squares)."),
     training: Optional[str] = typer.Option(None, "--training", help="Training frames: '20,30,40' or '20:101:10' (default: the paper's protocol)."),
     contours: Optional[Path] = typer.Option(None, "--contours", help="CSV of training contours (frame, x_px, y_px or x_mm, y_mm) instead of tracking."),
-    objective: str = typer.Option("auto", "--objective", help="auto (default: contour+displacement where speckle tracking observed the motion, else contour), contour (the paper's S_t) or contour+displacement (also the speckle-tracked displacement of the contour points)."),
-    tracking: str = typer.Option("speckle", "--tracking", help="speckle (frame 0's contour carried by speckle tracking, default) or glcv (re-segment every frame, as the paper)."),
-    force: float = typer.Option(paper.FORCE_N, "--force", callback=positive, min=1e-6, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force)."),
+    objective: Optional[str] = typer.Option(None, "--objective", help="auto (contour+displacement where speckle tracking observed the motion, else contour), contour (the paper's S_t) or contour+displacement (also the speckle-tracked displacement of the contour points). Default: the setting's (auto)."),
+    tracking: Optional[str] = typer.Option(None, "--tracking", help="speckle (frame 0's contour carried by speckle tracking) or glcv (re-segment every frame, as the paper). Default: the setting's (speckle)."),
+    force: Optional[float] = typer.Option(None, "--force", callback=positive, min=1e-6, max=1e3, help="Nominal pushing force in N (only F/E is determined; E is reported at this force). Default: the setting's (the paper's 0.25 N)."),
     particles: Optional[int] = typer.Option(None, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (default 4,399, the paper's; short for --set model.tissue_particles=N)."),
-    search_particles: int = typer.Option(1000, "--search-particles", min=100, max=1_000_000, help="Tissue particles of the coarser model the search runs on."),
-    max_evaluations: int = typer.Option(8, "--max-evaluations", min=1, help="Least squares: residual evaluations (each with a p-run Jacobian)."),
+    search_particles: Optional[int] = typer.Option(None, "--search-particles", min=100, max=1_000_000, help="Tissue particles of the coarser model the search runs on. Default: the setting's (1,000)."),
+    max_evaluations: Optional[int] = typer.Option(None, "--max-evaluations", min=1, max=10_000, help="Least squares: residual evaluations (each with a p-run Jacobian). Default: the setting's (8)."),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Dask worker processes of the local cluster (default: the cores)."),
     scheduler_address: Optional[str] = typer.Option(None, "--scheduler-address", help="Use an existing Dask cluster (tcp://host:8786)."),
-    boundary_offset: float = typer.Option(0.0, "--boundary-offset", min=-5.0, max=5.0, help="How far outside the true boundary your system's segmentations lie (mm, from a phantom of known size); masks move inwards by it."),
+    boundary_offset: Optional[float] = typer.Option(None, "--boundary-offset", min=-5.0, max=5.0, help="How far outside the true boundary your system's segmentations lie (mm, from a phantom of known size); masks move inwards by it. Default: the setting's (0)."),
     resume: Optional[Path] = typer.Option(None, "--resume", help="A search_log.jsonl of an interrupted calibration: its runs are not repeated."),
     settings_set: Optional[list[str]] = typer.Option(None, "--set", help="Change one setting: KEY=VALUE, KEY a dotted path (model.creep.tolerance=0.01, search_integrator=reduced; the fields of hifumotion run's [estimation]); repeatable."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
@@ -44,20 +43,22 @@ def calibrate(
     from hifumotion.run_info import RunRecord
     from hifumotion.workflow.pipeline import EstimationConfig, observe_and_calibrate
 
-    if method not in ("least_squares", "cmaes", "table1"):
+    if method is not None and method not in ("least_squares", "cmaes", "table1"):
         raise InputError(f"expected least_squares, cmaes or table1, got {method!r}", "--method")
-    if objective not in OBJECTIVES:
+    if objective is not None and objective not in OBJECTIVES:
         raise InputError(f"expected {', '.join(OBJECTIVES)}, got {objective!r}", "--objective")
-    if tracking not in ("speckle", "glcv"):
+    if tracking is not None and tracking not in ("speckle", "glcv"):
         raise InputError(f"expected speckle or glcv, got {tracking!r}", "--tracking")
     if scheduler_address is not None and (problem := scheduler_address_problem(scheduler_address)):
         raise InputError(problem, "--scheduler-address")
     if resume is not None:
         check_search_log(resume)
-    options = {"method": method, "force_n": force, "search_particles": search_particles,
-               "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset, "tracking": tracking,
-               "objective": objective, "workers": workers, "scheduler_address": scheduler_address,
-               **({} if particles is None else {"particles": particles})}
+    # only what was given: every other setting keeps its one default, in the settings' class
+    given = {"method": method, "force_n": force, "search_particles": search_particles,
+             "max_evaluations": max_evaluations, "boundary_offset_mm": boundary_offset, "tracking": tracking,
+             "objective": objective, "workers": workers, "scheduler_address": scheduler_address,
+             "particles": particles}
+    options = {key: value for key, value in given.items() if value is not None}
     settings = validate_config(EstimationConfig, apply_settings(options, settings_set), "options")
     observed = load_observed(observed_dir)
     frames = parse_frames(training, len(observed.frames), "--training") or default_frames(len(observed.frames))[0]
@@ -74,7 +75,7 @@ def calibrate(
     p = summary["parameters"]
     console.print(f"calibrated on frames {summary['training_frames']} with {summary['fit']['method']} "
                   f"({summary['fit']['runs']} runs): F/E = {p['force_over_youngs_m2']['value']:.3g} m² "
-                  f"(E = {p['youngs_modulus_pa']['value']:.0f} Pa at {force} N), ν = {p['poisson_ratio']['value']:.3f}, "
+                  f"(E = {p['youngs_modulus_pa']['value']:.0f} Pa at {settings.force_n:g} N), ν = {p['poisson_ratio']['value']:.3f}, "
                   f"β1 = {p['beta1_pa_s_pow']['value']:.3g}, β2 = {p['beta2']['value']:.2f}"
                   + (f", μ_f = {p['friction']['value']:.3f}" if "friction" in p else ""), highlight=False)
     rc = summary["fit"].get("resolution_check")
