@@ -46,6 +46,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
 from hifumotion.creep.contact import SLIP, STICK, ContactSet, FrictionLinearised, Plane, Punch, friction_linearised
 from hifumotion.creep.corotation import Corotation
 from hifumotion.creep.neo_hooke import NeoHooke
@@ -83,7 +84,7 @@ class CreepMaterial:
     poisson_ratio: float
     beta1: float = 1.0
     beta2: float = 0.5
-    density_kg_m3: float = 1050.0
+    density_kg_m3: float = TISSUE_DENSITY_KG_M3
     rate_floor_per_s: float = RATE_FLOOR_PER_S
     mu_max_pa_s: float = MU_MAX_PA_S
 
@@ -105,8 +106,8 @@ class CreepMaterial:
 class Surroundings:
     """Gravity (m/s², a vector) and the water the tissue sits in (none when ``water_line_m`` is None)."""
 
-    gravity_m_s2: tuple[float, float, float] = (0.0, -9.80665, 0.0)
-    water_density_kg_m3: float = 1000.0
+    gravity_m_s2: tuple[float, float, float] = (0.0, -STANDARD_GRAVITY_M_S2, 0.0)
+    water_density_kg_m3: float = WATER_DENSITY_KG_M3
     water_line_m: float | None = None
     up: int = 1  # the axis along which the water line is measured
 

@@ -21,6 +21,7 @@ from pydantic import Field, field_validator, model_validator
 import numpy as np
 from annotated_types import Ge, Gt, Le
 
+from hifumotion.physical import TISSUE_DENSITY_KG_M3
 from hifumotion import paper
 from hifumotion.config import ConfigModel
 from hifumotion.creep.settings import CreepSettings, ReducedSettings
@@ -42,7 +43,7 @@ class ModelSettings:
     cfl: Annotated[float, Gt(0), Le(1.0)] = 0.4        # safety factor on the time step
     max_step_s: Annotated[float, Gt(0)] = 5e-3         # largest time step (s)
     force_ramp_s: Annotated[float, Ge(0)] | None = None  # the force's linear rise (s); default: setup.json's push.ramp_s
-    tissue_density_kg_m3: Annotated[float, Gt(0)] = 1050.0
+    tissue_density_kg_m3: Annotated[float, Gt(0)] = TISSUE_DENSITY_KG_M3
     rate_floor_per_s: Annotated[float, Gt(0)] = RATE_FLOOR_PER_S   # floor of the shear rate in Eq. 16's μ (1/s; hifumotion.rheology)
     friction: Annotated[float, Ge(0)] = 0.5            # Coulomb friction of the tissue on the floor and the bar's face
                                         # (the operator's estimate, not fitted; a sample that slides depends on it)

@@ -32,6 +32,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
+from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
 from hifumotion.config import ConfigModel
 from hifumotion.errors import InputError
 from hifumotion.resources import MAX_FRAMES, check_memory
@@ -70,7 +71,7 @@ class TankConfig(ConfigModel):
 class TissueMaterial(ConfigModel):
     """The tissue's material (Table 3's parameters and the model's options)."""
 
-    density_kg_m3: float = Field(1050.0, gt=0, description="tissue density in kg/m³")
+    density_kg_m3: float = Field(TISSUE_DENSITY_KG_M3, gt=0, description="tissue density in kg/m³")
     youngs_modulus_pa: float = Field(paper.YOUNGS_MODULUS_PA, gt=0, description="Young's modulus E in Pa (Table 3: 13 kPa)")
     poisson_ratio: float = Field(paper.POISSON_RATIO, gt=-1, lt=0.5, description="Poisson's ratio (Table 3: 0.47)")
     beta1: float = Field(paper.BETA1, ge=0, description="rheological viscosity β1 in Pa·s^(1+β2) (Table 3: 1)")
@@ -177,8 +178,8 @@ class ParticleConfig(ConfigModel):
 
 
 class PhysicsConfig(ConfigModel):
-    gravity_m_s2: float = Field(9.80665, ge=0, description="gravitational acceleration in m/s²")
-    water_density_kg_m3: float = Field(1000.0, gt=0, description="rest density ρ0 of the water in kg/m³")
+    gravity_m_s2: float = Field(STANDARD_GRAVITY_M_S2, ge=0, description="gravitational acceleration in m/s²")
+    water_density_kg_m3: float = Field(WATER_DENSITY_KG_M3, gt=0, description="rest density ρ0 of the water in kg/m³")
     water_viscosity_pa_s: float = Field(0.02, ge=0, description="μ of Eq. 12 for the water in Pa·s")
     sound_speed_m_s: float | None = Field(None, gt=0, description="numerical speed of sound of the water (√K) in m/s; default from the depth")
     contact_coefficient: float | None = Field(None, ge=0, description="K_c of Eq. 18 between solids in N·m⁴/kg²; default from E")

@@ -12,13 +12,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
 from hifumotion.particles._numba import FLUID, RIGID, TISSUE, WALL
 from hifumotion.particles.elastic import RestNeighbourhoods, TissueParameters, rest_neighbourhoods
 from hifumotion.particles.kernels import kernel_derivative
 from hifumotion.particles.rigid import RigidBody
 
-WATER_DENSITY_KG_M3 = 1000.0
-STANDARD_GRAVITY_M_S2 = 9.80665
 
 
 @dataclass(frozen=True)
@@ -191,7 +190,7 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
                  fluid_positions_m: np.ndarray | None = None,
                  tissue_positions_m: np.ndarray | None = None,
                  tissue_volumes_m3: np.ndarray | None = None,
-                 tissue_density_kg_m3: float = 1050.0,
+                 tissue_density_kg_m3: float = TISSUE_DENSITY_KG_M3,
                  tissue_fixed: np.ndarray | None = None,
                  tissue_held_velocity_m_s: np.ndarray | None = None,
                  bodies: list[dict] | None = None,

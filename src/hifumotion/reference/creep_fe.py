@@ -42,6 +42,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
 from hifumotion.errors import InputError
 from hifumotion.rheology import MU_MAX_PA_S
 from hifumotion.reference._p2 import MM, P2Mesh, p2_mesh
@@ -74,10 +75,10 @@ class CreepingTissue:
     radius_mm: float
     force_n: Callable[[float], float]
     breakpoints_s: tuple[float, ...] = ()
-    density_kg_m3: float = 1050.0
-    water_density_kg_m3: float = 1000.0
+    density_kg_m3: float = TISSUE_DENSITY_KG_M3
+    water_density_kg_m3: float = WATER_DENSITY_KG_M3
     water_line_mm: float | None = None
-    gravity_m_s2: float = 9.80665
+    gravity_m_s2: float = STANDARD_GRAVITY_M_S2
     floor_friction: float = 0.5
     bar_friction: float = 0.5
     mu_max_pa_s: float = MU_MAX_PA_S

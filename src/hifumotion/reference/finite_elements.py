@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
 from hifumotion.reference._p2 import MM, spsolve
 
 
@@ -39,9 +40,9 @@ class PunchedTissue:
     axis: tuple[float, float, float]
     radius_mm: float
     force_n: float
-    density_kg_m3: float = 1050.0
-    water_density_kg_m3: float = 1000.0
-    gravity_m_s2: float = 9.80665
+    density_kg_m3: float = TISSUE_DENSITY_KG_M3
+    water_density_kg_m3: float = WATER_DENSITY_KG_M3
+    gravity_m_s2: float = STANDARD_GRAVITY_M_S2
     max_volume_mm3: float = 2.0
 
 
