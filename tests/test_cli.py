@@ -241,6 +241,9 @@ def test_the_runs_verdict_line_shows_both_margins_it_may_rest_on():
     line = _verdict(summary)
     assert line.startswith("better than holding still") and "+0.0003 ± 0.0027" in line
     assert "centroid +0.051 ± 0.020 mm" in line
+    # the headline names what decided: the centroid; the DSC margin is said to be within its spread
+    assert line.startswith("better than holding still by the centroid")
+    assert "the DSC margin is within its spread" in line
     # a run_info.json written before has no centroid margin: the DSC one alone
     old = {k: v for k, v in summary.items() if not k.startswith("centroid")}
     assert "centroid" not in _verdict(old)

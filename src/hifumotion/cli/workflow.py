@@ -112,15 +112,24 @@ def run(
 
 
 def _verdict(summary: dict) -> str:
-    """The physics against holding still, with the margin's spread over the validation frames."""
+    """The physics against holding still, with the margin's spread over the validation frames and
+    the metric that decided: a margin beyond its spread (``evaluate.margin_over``)."""
     verdict = summary.get("physics_vs_no_motion")
     if verdict is None:
         return "not compared with holding still (too few validation frames)"
     words = {"better": "better than", "worse": "worse than", "no better": "no better than"}[verdict]
-    # both margins: the verdict may rest on either (evaluate.margin_over)
-    centroid = ""
+    margins = {"DSC": (summary["dsc_margin_over_no_motion"], summary["dsc_margin_spread"])}
     if summary.get("centroid_margin_over_no_motion_mm") is not None:
-        centroid = (f", centroid {summary['centroid_margin_over_no_motion_mm']:+.3f} ± "
-                    f"{summary['centroid_margin_spread_mm']:.3f} mm")
-    return (f"{words} holding still (DSC {summary['dsc_margin_over_no_motion']:+.4f} ± "
-            f"{summary['dsc_margin_spread']:.4f}{centroid} a frame)")
+        margins["centroid"] = (summary["centroid_margin_over_no_motion_mm"], summary["centroid_margin_spread_mm"])
+    beyond = [name for name, (mean, spread) in margins.items() if abs(mean) > spread]
+    within = [name for name in margins if name not in beyond]
+    decided = f" by the {' and the '.join(beyond)}" if verdict != "no better" and beyond else ""
+    # both margins: the verdict may rest on either, and the line says which
+    centroid = ""
+    if "centroid" in margins:
+        centroid = f", centroid {margins['centroid'][0]:+.3f} ± {margins['centroid'][1]:.3f} mm"
+    note = ""
+    if decided and within:
+        note = f"; the {' and '.join(within)} margin is within its spread"
+    return (f"{words} holding still{decided} (DSC {margins['DSC'][0]:+.4f} ± {margins['DSC'][1]:.4f}{centroid} "
+            f"a frame{note})")

@@ -368,10 +368,16 @@ def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: 
     nm = outcome.evaluation.baselines["no_motion"]
     margin = outcome.evaluation.physics.get("margin_over_no_motion") or {}
     verdict = margin.get("verdict")
+    # the metric that decided: a margin beyond its spread (prediction.evaluate.margin_over)
+    beyond = [name for name, mean, spread in (("DSC", margin.get("dsc_margin_mean"), margin.get("dsc_margin_std")),
+                                              ("centroid", margin.get("centroid_margin_mean_mm"),
+                                               margin.get("centroid_margin_std_mm")))
+              if mean is not None and spread is not None and abs(mean) > spread]
+    by = f" by the {' and the '.join(beyond)}" if beyond else ""
     if verdict == "better":
-        claim = ("good", "the physics beats holding the last training contour")
+        claim = ("good", f"the physics beats holding the last training contour{by}")
     elif verdict == "worse":
-        claim = ("bad", "the physics is worse than holding the last training contour")
+        claim = ("bad", f"the physics is worse than holding the last training contour{by}")
     else:
         claim = ("bad", "the physics is no better than holding the last training contour")
     spread = (f' (per frame: DSC {fmt(margin.get("dsc_margin_mean"), 4)} ± {fmt(margin.get("dsc_margin_std"), 4)}, '
