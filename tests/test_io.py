@@ -406,3 +406,22 @@ def test_a_bar_rounded_beyond_its_radius_is_refused_naming_the_field():
     with pytest.raises(Exception, match="edge_radius_mm"):
         BarSetup(radius_mm=3.0, edge_radius_mm=4.0, tip_at_rest_mm=(0.0, 0.0, 0.0))
     assert BarSetup(tip_at_rest_mm=(0.0, 0.0, 0.0)).edge_radius_mm == 0.5   # a setup.json written before has none
+
+
+def test_a_byte_order_mark_is_no_content(tmp_path):
+    """Files saved by Windows editors and spreadsheets start with a UTF-8 byte-order mark: a
+    contour CSV and an init JSON read as without it (the mark was read as part of the first
+    column's name, and JSON refused)."""
+    import json
+
+    from hifumotion.io import read_contours_csv
+    from hifumotion.io.init_json import read_init_json
+
+    csv_path = tmp_path / "c.csv"
+    csv_path.write_text("frame,x_px,y_px\n0,1,1\n0,9,1\n0,9,9\n", encoding="utf-8-sig")
+    contour = next(iter(read_contours_csv(csv_path).values()))
+    assert contour.points_px.shape == (3, 2)
+    init = tmp_path / "init.json"
+    init.write_text(json.dumps({"a.png": {"ellipse": {"cx": 5, "cy": 5, "a": 3, "b": 2, "angle_deg": 0}}}),
+                    encoding="utf-8-sig")
+    assert "a.png" in read_init_json(init)

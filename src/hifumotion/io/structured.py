@@ -114,7 +114,7 @@ def read_structured(path: str | Path, kind: str, what: str) -> Any:
 
     p = require_regular_file(path, what)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")     # a byte-order mark (Windows editors) is no content
     except UnicodeDecodeError:
         raise InputError(f"not UTF-8 text; expected a {_FORMATS[kind]} file ({what})", p) from None
     except OSError as exc:

@@ -167,7 +167,7 @@ def read_contours_csv(path: str | Path, spacing_mm=None) -> dict[str, Contour]:
 
     p = require_regular_file(path, "contour CSV")
     try:
-        with open(p, newline="", encoding="utf-8") as fh:
+        with open(p, newline="", encoding="utf-8-sig") as fh:     # a spreadsheet's byte-order mark is no column name
             rows = list(csv.DictReader(fh))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"cannot read as a contour CSV ({brief(exc)})", p) from None

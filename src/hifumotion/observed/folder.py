@@ -133,7 +133,7 @@ def load_observed(folder: str | Path) -> Observed:
     _same_as_pngs(root / "frames.nii.gz", frames, "frames/", setup.pixel_mm, spacing_t=setup.frame_interval_s,
                   what_t="setup.json's frame_interval_s", unit_t="s", stepped_dimension=4)
     pos_path = require_regular_file(root / "sweep_positions.csv", "sweep_positions.csv")
-    with open(pos_path, newline="", encoding="utf-8") as fh:
+    with open(pos_path, newline="", encoding="utf-8-sig") as fh:
         try:
             z = np.array([float(r["z_mm"]) for r in csv.DictReader(fh)])
         except (KeyError, ValueError, TypeError):
