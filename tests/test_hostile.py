@@ -871,3 +871,21 @@ def test_setup_that_contradicts_its_own_folder_is_refused(tmp_path):
     (deep / "setup.json").write_text(json.dumps(data))
     with pytest.raises(InputError, match="water_depth_mm"):
         read_setup(deep / "setup.json")
+
+
+def test_a_truncated_volume_in_an_observed_folder_is_said_to_be_truncated(tmp_path):
+    """``frames.nii.gz`` cut short beside ``frames/``: it read as zeros and was reported as
+    images that differ from the PNGs; now the volume is named truncated, with how much it holds."""
+    import gzip
+
+    from hifumotion.errors import InputError
+    from hifumotion.observed import load_observed
+
+    folder = _tiny_observed(tmp_path / "obs")
+    volume = folder / "frames.nii.gz"
+    assert volume.is_file()
+    raw = gzip.decompress(volume.read_bytes())
+    volume.write_bytes(gzip.compress(raw)[: len(gzip.compress(raw)) // 2])
+    with pytest.raises(InputError, match="truncated") as exc:
+        load_observed(folder)
+    assert "frames.nii.gz" in str(exc.value)

@@ -82,7 +82,9 @@ def _file_bytes(path: Path, limit: int) -> int:
     try:
         with gzip.open(path, "rb") as fh:
             while total < limit:
-                chunk = fh.read(1 << 22)
+                # small reads: a truncated stream raises on the read that meets its end, and what
+                # the reads before it gave is what the file holds
+                chunk = fh.read(1 << 16)
                 if not chunk:
                     break
                 total += len(chunk)

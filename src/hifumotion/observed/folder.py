@@ -184,6 +184,9 @@ def _same_as_pngs(path: Path, stack: np.ndarray, pngs: str, pixel_mm: float, spa
     from hifumotion.io.files import require_regular_file
 
     require_regular_file(path, "NIfTI volume")
+    from hifumotion.io.itk import check_nifti
+
+    check_nifti(path)       # a truncated volume is said to be truncated, not to differ from the PNGs
     try:
         image = sitk.ReadImage(str(path))
     except RuntimeError:
