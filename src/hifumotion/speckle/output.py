@@ -139,18 +139,35 @@ def write_material_points(folder: str | Path, points: dict[str, np.ndarray], spa
     write_text(folder / "material_points.csv", material_points_csv(points, spacing_mm))
 
 
-def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) -> Path:
-    """Frame 0 with the last frame's displacement of its tissue (arrows, true length, from
-    where the material was) and both contours; the last frame with its contour; the last
-    frame's axial strain ε_yy on frame 0's grid. Drawn as the frames are stored and shown by any
-    image viewer: row 0 at the top."""
+def _pyplot():
+    """matplotlib's pyplot on the file-only backend (no display is needed or opened)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _save_png(fig, path: str | Path) -> Path:
+    """``fig`` laid out and written atomically to ``path`` as PNG, then closed."""
+    import matplotlib.pyplot as plt
+
     from hifumotion.io.files import atomic_path
 
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) -> Path:
+    """Frame 0 with the last frame's displacement of its tissue (arrows, true length, from
+    where the material was) and both contours; the last frame with its contour; the last
+    frame's axial strain ε_yy on frame 0's grid. Drawn as the frames are stored and shown by any
+    image viewer: row 0 at the top."""
+    plt = _pyplot()
     series = result.displacement
     last = series.n_frames - 1
     row, col = series.spacing_mm
@@ -178,22 +195,12 @@ def motion_figure(frames: np.ndarray, result: FollowResult, path: str | Path) ->
     fig.colorbar(im, ax=ax[2], fraction=0.046)
     for a in ax:
         a.set_aspect("equal")
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return Path(path)
+    return _save_png(fig, path)
 
 
 def points_figure(frames: np.ndarray, track: PointTrack, path: str | Path) -> Path:
     """Frame 0 and the last frame, each point's trajectory drawn over both (px, row 0 at the top)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from hifumotion.io.files import atomic_path
-
+    plt = _pyplot()
     last = track.n_frames - 1
     pos = track.positions_px
     fig, ax = plt.subplots(1, 2, figsize=(12, 5))
@@ -205,11 +212,7 @@ def points_figure(frames: np.ndarray, track: PointTrack, path: str | Path) -> Pa
         a.set_title(f"frame {t}" + (", where the points start" if t == 0 else ", where they are"))
         a.set_xlabel("x (px)")
         a.set_ylabel("y (px)")
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return Path(path)
+    return _save_png(fig, path)
 
 
 def write_point_track(folder: str | Path, frames: np.ndarray, track: PointTrack, spacing_mm=None,

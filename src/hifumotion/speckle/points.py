@@ -127,13 +127,13 @@ def _patch_ncc(a: np.ndarray, pa: np.ndarray, b: np.ndarray, pb: np.ndarray, siz
 
 
 def _u8(frame: np.ndarray) -> np.ndarray:
-    """One frame as 8-bit grey (what both estimators take): uint8 kept, [0, 1] floats scaled."""
-    f = np.asarray(frame)
-    if f.dtype == np.uint8:
-        return f
+    """One frame as 8-bit grey (what both estimators take), as the region tracker makes it:
+    uint8 kept, anything else to [0, 1] (:func:`~.displacement.unit_frames`) and scaled."""
+    from hifumotion.speckle._flow import _u8 as flow_u8
     from hifumotion.speckle.displacement import unit_frames
 
-    return np.round(unit_frames(f[None])[0] * 255.0).astype(np.uint8)
+    f = np.asarray(frame)
+    return f if f.dtype == np.uint8 else flow_u8(unit_frames(f[None])[0])
 
 
 class PointTracker:
