@@ -19,13 +19,14 @@ from hifumotion.errors import InputError
 @app.command()
 def demo(
     output: Path = typer.Option(Path("demo-output"), "--output", "-o", help="New output folder."),
-    preset: str = typer.Option("push_change", "--preset", help="Synthetic experiment: push_change (the demo's resolution, the push raised unannounced after the training frames: minutes), slow_push (the force rising all along), demo (the paper's ramp-and-hold push), paper, push_release, oblique, small (seconds), default (the paper's resolution; long)."),
+    preset: str = typer.Option("push_change", "--preset", help="Synthetic experiment: push_change (the demo's resolution, the push raised unannounced after the training frames; the package ships it at seed 0, any other preset or seed is generated: minutes), slow_push (the force rising all along), demo (the paper's ramp-and-hold push), paper, push_release, oblique, small (seconds), default (the paper's resolution; long)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of the synthetic experiment."),
     dataset: Optional[Path] = typer.Option(None, "--dataset", help="Real images with expert masks (images/, masks/, init.json); default ../shared/data/ddti."),
     images: int = typer.Option(6, "--images", min=1, help="How many images of the dataset to segment."),
     particles: Optional[int] = typer.Option(None, "--particles", min=100, max=1_000_000, help="Tissue particles of the fitted model (default: the preset's model size)."),
     max_evaluations: Optional[int] = typer.Option(None, "--max-evaluations", min=1, help="Least-squares evaluations of the calibration (default 3 on the reduced presets, 8 on default)."),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Dask worker processes (default: the cores)."),
+    regenerate: bool = typer.Option(False, "--regenerate", help="Make the twin afresh (its finite-element truth: minutes) instead of copying the one the package ships."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Run the whole system on the synthetic experiment: twin → segment → reconstruct → calibrate → predict → report."""
@@ -49,9 +50,9 @@ def demo(
     if particles is not None:
         overrides.update(particles=particles, search_particles=particles)
     settings = DemoSettings(preset=preset, seed=seed, dataset=dataset, dataset_images=images,
-                            estimation_overrides=overrides)
+                            estimation_overrides=overrides, regenerate=regenerate)
     record = RunRecord("demo", config={"preset": preset, "seed": seed, "dataset": None if dataset is None else str(dataset),
-                                       "images": images}, seed=seed)
+                                       "images": images, "regenerate": regenerate}, seed=seed)
     with output_folder(output, overwrite, inputs=(dataset,)) as out:
         with StageBars() as progress:
             summary = run_demo(out, settings, record, progress)

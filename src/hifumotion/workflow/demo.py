@@ -2,8 +2,11 @@
 
 One documented order (each step's folder inside the output):
 
-1. ``experiment/`` — generate the synthetic experiment (:func:`~hifumotion.experiment.generate_twin`):
-   the sweep, the time series, the clicked contour (``observed/``) and the truth (``truth/``);
+1. ``experiment/`` — the synthetic experiment: the sweep, the time series, the clicked contour
+   (``observed/``) and the truth (``truth/``). The twin that ships with the package
+   (:func:`~hifumotion.experiment.stored.bundled_twin`: preset ``push_change``, seed 0) is copied
+   there; another preset or seed, or ``regenerate``, makes one afresh
+   (:func:`~hifumotion.experiment.generate_twin`: its finite-element truth takes minutes);
 2. ``segmentation/`` — the paper's comparison of the six level-set methods (Table 2, Figures
    2–3) on planes of the twin's sweep against their true sections, and on the real images
    with expert masks of ``../shared/data/ddti`` when present;
@@ -59,7 +62,7 @@ def sweep_dataset(twin, folder: str | Path, planes: int = 4, clicks: int = 8, er
                   seed: int = 0) -> Path:
     """A segmentation dataset (``images/``, ``masks/``, ``init.json``) from a twin's sweep.
 
-    ``twin`` is a :class:`~hifumotion.experiment.TwinResult`. The ``planes`` sweep planes
+    ``twin`` is a :class:`~hifumotion.experiment.stored.StoredTwin`. The ``planes`` sweep planes
     nearest the middle of the tissue, their true sections as masks, and a clinician's rough
     clicks on each (``clicks`` points along the true boundary, each off by a normal radial
     error of ``error_mm``) as the common initial contour."""
@@ -69,7 +72,7 @@ def sweep_dataset(twin, folder: str | Path, planes: int = 4, clicks: int = 8, er
     from hifumotion.io.writers import write_mask_png, write_png_stack
 
     folder = Path(folder)
-    pixel = twin.probe.pixel_mm
+    pixel = twin.pixel_mm
     sections = np.asarray(twin.sweep_masks, bool)          # the end planes are empty
     area = sections.sum(axis=(1, 2))
     tissue = np.flatnonzero(area > 0.25 * area.max())
@@ -91,17 +94,43 @@ def sweep_dataset(twin, folder: str | Path, planes: int = 4, clicks: int = 8, er
 class DemoSettings:
     """What ``hifumotion demo`` runs (every field has a default)."""
 
-    preset: str = "push_change"              # twin preset: the push changed unannounced after the training frames, at the demo's resolution (minutes); small (tests), default (the paper's size)
+    preset: str = "push_change"              # twin preset: the push changed unannounced after the training frames, at the demo's resolution (the package ships it at seed 0); small (tests), default (the paper's size)
     seed: int = 0
     dataset: Path | None = None              # real images with expert masks; default ../shared/data/ddti
     dataset_images: int = 6
     sweep_planes: int = 4
     estimation_overrides: dict | None = None     # EstimationConfig fields on top of demo_estimation()
+    regenerate: bool = False                 # make the twin afresh even where the package ships it
+
+
+def demo_twin(out: Path, settings: DemoSettings, record, tell: Progress):
+    """Step 1: the twin in ``out/experiment`` — the package's own, copied, where it ships one for
+    the preset and seed and ``regenerate`` is not asked; otherwise generated (minutes)."""
+    import shutil
+
+    from hifumotion.experiment import generate_twin, twin_config
+    from hifumotion.experiment.stored import BUNDLED_PRESET, BUNDLED_SEED, StoredTwin, bundled_twin, read_twin
+
+    folder = out / "experiment"
+    if not settings.regenerate and (settings.preset, settings.seed) == (BUNDLED_PRESET, BUNDLED_SEED):
+        with record.stage("experiment: the package's twin"):
+            shutil.copytree(bundled_twin(), folder)
+            twin = read_twin(folder)
+        record.config["twin"] = "the package's twin (experiment/run_info.json: how it was made)"
+        return twin
+    if not settings.regenerate:
+        log.info(f"the package ships the twin of preset {BUNDLED_PRESET}, seed {BUNDLED_SEED} only: generating "
+                 f"preset {settings.preset}, seed {settings.seed}")
+    cfg = twin_config(settings.preset, seed=settings.seed)
+    with record.stage("experiment: generate the synthetic twin"):
+        result = generate_twin(cfg, folder, progress=tell)
+    record.config["twin"] = "generated"
+    return StoredTwin(folder, cfg, result.observed, np.asarray(result.frame_masks, bool),
+                      np.asarray(result.sweep_masks, bool), result.parameters, result.motion)
 
 
 def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | None = None) -> dict:
     """Steps 1–5 of the module docstring into ``out`` (an output folder being written)."""
-    from hifumotion.experiment import generate_twin, twin_config
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.io.dataset import Dataset, load_dataset
     from hifumotion.report.build import ReportInputs, SegmentationResult, output_links, write_report
@@ -109,11 +138,8 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
     from hifumotion.segmentation.compare import compare_methods, write_comparison
 
     tell = progress or (lambda stage, fraction: None)
-    cfg = twin_config(settings.preset, seed=settings.seed)
-    twin = out / "experiment"
-    with record.stage("experiment: generate the synthetic twin"):
-        result = generate_twin(cfg, twin, progress=tell)
-    truth_params = result.parameters
+    result = demo_twin(out, settings, record, tell)
+    cfg, twin, truth_params = result.config, result.folder, result.parameters
 
     segmentation = []
     methods = list(METHODS)
@@ -166,7 +192,9 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
             true_centroid_mm=np.asarray(motion["centroid_mm"], float),
             true_push_scale=_true_push_scale(cfg, result.observed.setup, outcome.training),
             links=output_links(out, {"experiment/truth/particles/frames.pvd — the twin's particles (ParaView)":
-                                     out / "experiment" / "truth" / "particles" / "frames.pvd"}))
+                                     out / "experiment" / "truth" / "particles" / "frames.pvd",
+                                     "experiment/truth/finite_elements.pvd — the twin's finite-element truth (ParaView)":
+                                     out / "experiment" / "truth" / "finite_elements.pvd"}))
         page = write_report(out / "report", outcome, truth, inputs)
     summary = outcome_summary(outcome)
     summary["report"] = page.relative_to(out).as_posix()
@@ -197,4 +225,4 @@ def _items(tell: Progress, stage: str):
     return wrap
 
 
-__all__ = ["DemoSettings", "run_demo", "sweep_dataset", "default_dataset", "demo_estimation"]
+__all__ = ["DemoSettings", "demo_twin", "run_demo", "sweep_dataset", "default_dataset", "demo_estimation"]
