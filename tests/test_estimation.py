@@ -653,6 +653,17 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     assert set(online["horizon_frames"]) == {2, 4} and np.all(online["error_mm"] >= 0)
     aim = np.genfromtxt(pred / "aim.csv", delimiter=",", names=True)
     assert len(aim) == max(valid) + 1 and abs(aim["shift_mm"][0]) < 1e-9
+    # the band: the model run again with the fit moved along its least determined direction
+    band = json.loads((pred / "prediction.json").read_text())["band"]
+    assert band["coordinates"] == params["fit"]["correlation"]["coordinates"]
+    minus, plus = band["parameters_minus"], band["parameters_plus"]
+    e = np.log(params["parameters"]["youngs_modulus_pa"]["value"])
+    lo, hi = np.log(SearchSpace().youngs_pa)          # each end held inside the search bounds
+    assert minus["youngs_modulus_pa"] == pytest.approx(np.exp(np.clip(e - band["step"][0], lo, hi)), rel=1e-6)
+    assert plus["youngs_modulus_pa"] == pytest.approx(np.exp(np.clip(e + band["step"][0], lo, hi)), rel=1e-6)
+    far = np.maximum(np.hypot(aim["aim_minus_x_mm"] - aim["aim_x_mm"], aim["aim_minus_y_mm"] - aim["aim_y_mm"]),
+                     np.hypot(aim["aim_plus_x_mm"] - aim["aim_x_mm"], aim["aim_plus_y_mm"] - aim["aim_y_mm"]))
+    assert np.allclose(aim["band_mm"], far, atol=2e-4) and abs(aim["band_mm"][0]) < 1e-9
     out = subprocess.run(cli + ["score", str(pred), str(folder / "truth")], capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0, out.stderr

@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 
 from hifumotion.cli.app import app, positive
-from hifumotion.console import console
+from hifumotion.console import console, log
 from hifumotion.errors import InputError
 
 
@@ -97,6 +97,7 @@ def predict(
     output: Path = typer.Option(..., "--output", "-o", help="New prediction folder."),
     frames: Optional[str] = typer.Option(None, "--frames", help="Frames to predict: '110,120' or '110:191:10' (default: training and validation frames of the paper's protocol)."),
     online: Optional[str] = typer.Option(None, "--online", help="Online mode: horizons in frames, e.g. '4,6,8' — at each frame t predict t + k from the tracked frames up to t (online.csv)."),
+    band: bool = typer.Option(True, "--band/--no-band", help="Also predict the aim one standard error either way along the direction the training frames fix least (two more runs): aim.csv's band_mm."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Predict the imaging plane's contours with the fitted model: frames/frame_NNNN.png, contours.csv, aim.csv, tissue.pvd."""
@@ -128,6 +129,14 @@ def predict(
             pred = predict_calibrated(spec, k, reference, wanted, online_frames)
             seconds = time.perf_counter() - t0
             progress("predict", 1.0)
+        if band:
+            with record.stage("band"):
+                from hifumotion.prediction.band import aim_band, covariance_from_calibration
+
+                try:
+                    pred.band = aim_band(spec, k, reference, wanted, covariance_from_calibration(meta), pred.aim_mm)
+                except InputError as exc:      # the prediction stands; say why it has no band
+                    log.warning(f"no band: {exc} (parameters.json)")
         if horizons:
             with record.stage("online"):
                 from hifumotion.prediction.pipeline import online_csv, online_predictions
@@ -143,6 +152,9 @@ def predict(
         record.write(out)
     console.print(f"predicted {len(wanted)} frames in {seconds:.0f} s; masks, contours.csv and aim.csv in "
                   f"{output.resolve()}", highlight=False)
+    if pred.band is not None:
+        console.print(f"the aim one standard error either way along the least determined direction: up to "
+                      f"{pred.band.width_mm.max():.2f} mm from the fit's (aim.csv band_mm)", highlight=False)
 
 
 @app.command()

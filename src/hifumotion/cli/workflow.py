@@ -65,6 +65,9 @@ def demo(
                   f"Kalman {v['kalman_validation_dsc_mean']:.4f}; the physics is {_verdict(v)}", highlight=False)
     if v.get("verdict"):
         console.print(f"of every predictor: {v['verdict']}", highlight=False)
+    if v.get("aim_band_largest_mm") is not None:
+        console.print(f"the aim, the fit one standard error either way along its least determined direction: up to "
+                      f"{v['aim_band_largest_mm']:.2f} mm from the fit's (prediction/aim.csv band_mm)", highlight=False)
     if v.get("choice"):
         console.print(f"the training frames' choice: {v['choice']}", highlight=False)
     console.print(f"open {root / 'report' / 'report.html'} — the report; prediction/tissue.pvd in ParaView; "

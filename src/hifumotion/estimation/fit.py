@@ -113,6 +113,11 @@ def cmaes_fit(ev: Evaluator, theta0: np.ndarray, max_generations: int = 12, pops
     return FitResult(theta, ev.one(theta), "cmaes", generations, ev.runs, trace, str(stop), "maxiter" not in stop)
 
 
+#: How large an error in each coordinate matters (a coordinate is *determined* below it): 20 % of
+#: E, β1 and μ_f, 0.05 of ν, 0.2 of β2.
+RELEVANCE = {"log_E": 0.2, "nu": 0.05, "log_beta1": 0.2, "beta2": 0.2, "log_mu": 0.2}
+
+
 @dataclass
 class Uncertainty:
     """Standard errors of the fitted coordinates and what the data determine."""
@@ -149,7 +154,7 @@ def uncertainty(ev: Evaluator, theta: np.ndarray, residuals_mm: np.ndarray | Non
     cov = s2 * (vt[seen].T / sv[seen] ** 2) @ vt[seen]
     d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
     corr = cov / np.outer(d, d)
-    scale = np.array([0.2, 0.05, 0.2, 0.2, 0.2][:p])   # ln μ_f: 20 %, as ln E
+    scale = np.array([RELEVANCE[name] for name in ev.space.names])
     scaled_sv = np.linalg.svd(j * ev.space.steps, compute_uv=False)
     return Uncertainty(std, corr, scaled_sv, float(np.sqrt(s2)),
                        {name: bool(s < sc) for name, s, sc in zip(ev.space.names, std, scale)})
@@ -167,5 +172,5 @@ def degeneracy(ev: Evaluator, theta: np.ndarray, factors=(0.5, 2.0)) -> list[dic
     return out
 
 
-__all__ = ["FitResult", "initial_guess", "jacobian", "least_squares_fit", "cmaes_fit", "Uncertainty",
+__all__ = ["RELEVANCE", "FitResult", "initial_guess", "jacobian", "least_squares_fit", "cmaes_fit", "Uncertainty",
            "uncertainty", "degeneracy"]

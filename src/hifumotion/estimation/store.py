@@ -120,7 +120,11 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
             "space_mapping": cal.mapped,
             "degeneracy": cal.degeneracy,
             "resolution_check": cal.resolution,
-            "correlation": {"coordinates": ["log_E", "nu", "log_beta1", "beta2"], "matrix": cal.correlation},
+            # the fit's coordinates (estimation.space), their standard errors (null: no data bound
+            # it) and correlations: the Gauss–Newton covariance the prediction's band is made from
+            "correlation": {"coordinates": list(cal.std),
+                            "std": [float(v) if np.isfinite(v) else None for v in cal.std.values()],
+                            "matrix": cal.correlation},
             "runs": cal.runs,
             "failed_runs": cal.failed_runs,
             "converged": cal.search.converged if cal.search is not None else None,

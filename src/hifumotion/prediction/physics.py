@@ -74,6 +74,7 @@ class Prediction:
     aim_plan_mm: np.ndarray     # (2,) the aim point at frame 0 (the plan)
     run: ModelRun
     pixel_mm: float
+    band: object = None         # prediction.band.AimBand: the aim one standard error either way, when made
 
 
 def aim_point_px(mask: np.ndarray) -> np.ndarray:

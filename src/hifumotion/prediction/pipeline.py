@@ -80,20 +80,29 @@ def predict_calibrated(spec, k, reference, frames, online_frames=()) -> Predicti
 
 
 def aim_csv(pred: Prediction, frame_interval_s: float, masks: dict | None = None) -> str:
-    """``frame, time_s, aim_x_mm, aim_y_mm, shift_x_mm, shift_y_mm, shift_mm[, centroid_x_mm, centroid_y_mm]``.
+    """``frame, time_s, aim_x_mm, aim_y_mm, shift_x_mm, shift_y_mm, shift_mm, section_centroid_x_mm,
+    section_centroid_y_mm`` and, with the prediction's band (:mod:`hifumotion.prediction.band`),
+    ``band_mm, aim_minus_x_mm, aim_minus_y_mm, aim_plus_x_mm, aim_plus_y_mm``.
 
     Image axes (x = column, y = row) in mm from pixel (0, 0)'s centre; the shift is from the plan (frame 0)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
+    band = pred.band
     w.writerow(["frame", "time_s", "aim_x_mm", "aim_y_mm", "shift_x_mm", "shift_y_mm", "shift_mm",
-                "section_centroid_x_mm", "section_centroid_y_mm"])
+                "section_centroid_x_mm", "section_centroid_y_mm"]
+               + (["band_mm", "aim_minus_x_mm", "aim_minus_y_mm", "aim_plus_x_mm", "aim_plus_y_mm"]
+                  if band is not None else []))
     for f, a in enumerate(pred.aim_mm):
         d = a - pred.aim_plan_mm
         c = ("", "")
         if masks is not None and f in masks and masks[f].any():
             c = tuple(f"{v:.4f}" for v in centroid(masks[f], pred.pixel_mm))
-        w.writerow([f, f"{f * frame_interval_s:.4f}", f"{a[0]:.4f}", f"{a[1]:.4f}", f"{d[0]:.4f}", f"{d[1]:.4f}",
-                    f"{np.hypot(*d):.4f}", *c])
+        row = [f, f"{f * frame_interval_s:.4f}", f"{a[0]:.4f}", f"{a[1]:.4f}", f"{d[0]:.4f}", f"{d[1]:.4f}",
+               f"{np.hypot(*d):.4f}", *c]
+        if band is not None:
+            row += ([f"{band.width_mm[f]:.4f}", *(f"{v:.4f}" for v in band.aim_mm[:, f].ravel())]
+                    if f < len(band.width_mm) else [""] * 5)
+        w.writerow(row)
     return buf.getvalue()
 
 
@@ -148,6 +157,8 @@ def write_prediction_folder(folder: str | Path, pred: Prediction, frames, frame_
     summary = {"frames": frames, "parameters": pred.run.parameters.as_dict(), "seconds": seconds,
                "simulated_s": max(frames) * frame_interval_s, "validation_frames": validation,
                "validation_window_s": window, "realtime_ratio": None if not window else seconds / window}
+    if pred.band is not None:
+        summary["band"] = pred.band.as_dict()
     write_json(Path(folder) / "prediction.json", summary)
     return summary
 

@@ -308,15 +308,27 @@ def _aim_parts(outcome, inputs: ReportInputs, folder: Path) -> list[str]:
     if inputs.true_centroid_mm is not None:
         c = np.asarray(inputs.true_centroid_mm, float)[: len(pred.aim_mm)]
         true_shift, true_t = c - c[0], np.arange(len(c)) * dt
-    png = figures.aim_trajectory(t, shift, folder / "aim.png", true_shift, true_t, outcome.validation[0] * dt)
+    band = pred.band
+    png = figures.aim_trajectory(t, shift, folder / "aim.png", true_shift, true_t, outcome.validation[0] * dt,
+                                 None if band is None else band.aim_mm - pred.aim_plan_mm)
+    wide = band is not None
     rows = [[f, f * dt, shift[f, 0], shift[f, 1], float(np.hypot(*shift[f]))]
+            + ([float(band.width_mm[f])] if wide and f < len(band.width_mm) else [""] if wide else [])
             for f in outcome.validation if f < len(shift)]
-    return [paragraph("The planned focus is the target's centroid on frame 0; the model carries that material "
-                      "point. Its predicted shift tells the operator where to move the focus (image axes: x along "
-                      "the transducer, y in depth; mm). Every frame: prediction/aim.csv."),
-            figure(png.name, "Where to aim: the predicted shift of the planned focus"),
-            table(["frame", "time (s)", "shift x (mm)", "shift y (mm)", "|shift| (mm)"], rows,
-                  "Validation frames")]
+    parts = [paragraph("The planned focus is the target's centroid on frame 0; the model carries that material "
+                       "point. Its predicted shift tells the operator where to move the focus (image axes: x along "
+                       "the transducer, y in depth; mm). Every frame: prediction/aim.csv.")]
+    if band is not None:
+        moved = ", ".join(f"{name} {step:+.3g}" for name, step in zip(band.coordinates, band.direction))
+        parts.append(paragraph(
+            "The band: the aim predicted again with the fit moved one standard error either way along the "
+            f"direction the training frames fix least ({moved} in the fit's coordinates), from the calibration's "
+            f"Gauss–Newton covariance. Up to {band.width_mm.max():.3f} mm from the fit's aim: how far that "
+            "undetermined direction moves the prediction (aim.csv band_mm)."))
+    parts += [figure(png.name, "Where to aim: the predicted shift of the planned focus"),
+              table(["frame", "time (s)", "shift x (mm)", "shift y (mm)", "|shift| (mm)"]
+                    + (["band (mm)"] if wide else []), rows, "Validation frames")]
+    return parts
 
 
 def _paraview_parts(links: dict, folder: Path) -> list[str]:

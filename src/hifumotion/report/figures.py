@@ -101,12 +101,21 @@ def _per_frame(frames, physics, baselines: dict, path, training, validation, yla
 
 
 def aim_trajectory(times_s, aim_shift_mm: np.ndarray, path: str | Path, true_shift_mm: np.ndarray | None = None,
-                   true_times_s=None, validation_from_s: float | None = None) -> Path:
+                   true_times_s=None, validation_from_s: float | None = None,
+                   band_shift_mm: np.ndarray | None = None) -> Path:
     """Where to aim: the predicted shift of the aim point from the plan (x, y in mm) against
-    time, beside the true section's centroid shift when known."""
+    time, beside the true section's centroid shift when known; ``band_shift_mm`` ``(2, F, 2)``,
+    the shifts one standard error either way along the least determined direction, shaded."""
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4))
     shift = np.asarray(aim_shift_mm, float)
+    if band_shift_mm is not None:
+        b = np.asarray(band_shift_mm, float)
+        n = min(len(times_s), b.shape[1])
+        both = np.concatenate([b[:, :n], shift[None, :n]])
+        for axis, label in ((0, "±1 σ, least determined direction"), (1, None)):
+            axes[0].fill_between(np.asarray(times_s)[:n], both[:, :, axis].min(0), both[:, :, axis].max(0),
+                                 color=COLOURS["physics"], alpha=0.2, lw=0, label=label)
     axes[0].plot(times_s, shift[:, 0], color=COLOURS["physics"], label="predicted x")
     axes[0].plot(times_s, shift[:, 1], color=COLOURS["physics"], ls="--", label="predicted y (depth)")
     if true_shift_mm is not None:

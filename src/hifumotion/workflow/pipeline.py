@@ -58,6 +58,7 @@ class EstimationConfig(CalibrationSettings):
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
+    prediction_band: bool = Field(True, description="also predict the aim one standard error either way along the direction the training frames fix least (two more runs of the model): aim.csv's band_mm, prediction.json's band, the report")
     @field_validator("horizons_frames")
     @classmethod
     def _horizons(cls, v):
@@ -189,6 +190,11 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
         t0 = time.perf_counter()
         pred = predict_calibrated(cal.spec, cal.parameters, reference, sorted(set(training) | set(validation)), keep)
         predict_s = time.perf_counter() - t0
+        if s.prediction_band:
+            from hifumotion.prediction.band import aim_band
+
+            pred.band = aim_band(cal.spec, cal.parameters, reference, sorted(set(training) | set(validation)),
+                                 cal.summary["fit"]["correlation"], pred.aim_mm)
         folder = out / "prediction"
         write_prediction_folder(folder, pred, sorted(set(training) | set(validation)), observed.frame_interval_s,
                                 validation, predict_s)
@@ -265,6 +271,8 @@ def outcome_summary(o: PipelineOutcome) -> dict:
            "online_loop_latency_with_tracking_ms_median": (o.online_loop.summary()["latency_with_tracking_ms"]["median"]
                                                            if o.online_loop is not None else None),
            "online_loop_push_scale_last": float(o.online_loop.scale[-1]) if o.online_loop is not None else None,
+           "aim_band_largest_mm": (float(o.prediction.band.width_mm.max())
+                                   if o.prediction.band is not None else None),
            "calibration_runs": o.calibration.runs, "predict_s": o.predict_s,
            "predict_over_realtime": o.realtime_ratio, "parameters": o.calibration.parameters.as_dict()}
     return {k: (round(v, 5) if isinstance(v, float) and np.isfinite(v) else v) for k, v in out.items()}
