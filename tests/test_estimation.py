@@ -1,5 +1,6 @@
 """Parameter estimation and prediction: the objective, the estimators, the predicted sections, the CLI."""
 
+import io
 import json
 import shutil
 import subprocess
@@ -136,6 +137,40 @@ def test_predicted_section_follows_a_rigid_shift():
 
     assert dice(pred, expected) > 0.99
     assert np.allclose(centroid(pred, 0.2) - centroid(mask0, 0.2), shift[:2], atol=0.03)
+
+
+def test_the_online_aim_is_the_tracked_centroid_carried_by_the_models_motion():
+    """A model translating rigidly at a known velocity, a tracked section offset from it by a
+    fraction of a pixel: the aim k frames ahead is the tracked centroid plus k frames of motion
+    (the closed form), and the CSV writes that aim."""
+    from types import SimpleNamespace
+
+    from hifumotion.metrics import centroid
+    from hifumotion.prediction.pipeline import online_csv, online_predictions
+
+    mask0 = disc(PLANE.shape, 70, 60, 25)
+    ref = ReferenceShape(mask0, PLANE)
+    g = np.stack(np.meshgrid(np.arange(4, 28, 1.0), np.arange(3, 22, 1.0), np.arange(2, 9, 1.0),
+                             indexing="ij"), -1).reshape(-1, 3)
+    v = np.array([0.13, -0.07, 0.0])            # mm a frame
+    run = SimpleNamespace(kept={f: g + f * v for f in range(12)}, rest_mm=g)
+    aim = np.array([[14.0, 12.0]]) + np.arange(12)[:, None] * v[:2]     # the aim point rides along
+    pred = SimpleNamespace(run=run, pixel_mm=PLANE.pixel_mm, aim_mm=aim)
+    # the tracked sections: the disc moved with the tissue, 1.7 px right and 0.3 px up of the model's
+    tracked = np.stack([disc(PLANE.shape, 70 + 1.7 + f * v[0] / 0.2, 60 - 0.3 + f * v[1] / 0.2, 25)
+                        for f in range(12)])
+    out = online_predictions(pred, SimpleNamespace(spacing_mm=1.0), ref, tracked, [3, 5], [0, 2, 4, 6])
+    for k in (3, 5):
+        assert sorted(out.aims_mm[k]) == [t + k for t in (0, 2, 4, 6)]
+        for t in (0, 2, 4, 6):
+            expected = centroid(tracked[t], 0.2) + k * v[:2]
+            np.testing.assert_allclose(out.aims_mm[k][t + k], expected, atol=1e-9)
+            # its mask realises the aim only to the grid's quantisation (within half a pixel)
+            assert np.linalg.norm(centroid(out.masks[k][t + k], 0.2) - expected) < 0.5 * 0.2
+            assert out.masks[k][t + k].shape == PLANE.shape
+    rows = np.genfromtxt(io.StringIO(online_csv(out, tracked, 0.2, 0.05)), delimiter=",", names=True)
+    first = rows[(rows["horizon_frames"] == 3) & (rows["frame"] == 3)][0]
+    np.testing.assert_allclose([first["predicted_x_mm"], first["predicted_y_mm"]], out.aims_mm[3][3], atol=1e-4)
 
 
 def test_predicted_mask_is_the_interpolation_at_every_pixel_under_a_large_motion():

@@ -15,7 +15,8 @@ of one plane during the push, a clinician's rough contour on the first frame.
 
 from hifumotion.experiment.blob import Blob
 from hifumotion.experiment.config import PRESETS, TwinConfig, twin_config
+from hifumotion.experiment.stored import StoredTwin, bundled_twin, read_twin
 from hifumotion.experiment.twin import TwinResult, generate_twin, motion_summary, resolution, summary_line
 
 __all__ = ["Blob", "PRESETS", "TwinConfig", "twin_config", "TwinResult", "generate_twin", "motion_summary",
-           "resolution", "summary_line"]
+           "resolution", "summary_line", "StoredTwin", "bundled_twin", "read_twin"]

@@ -41,6 +41,17 @@ def summary(masks: dict, truth: dict, pixel_mm: float, frames) -> dict:
             "centroid_max_mm": float(np.max(c))}
 
 
+def aim_summary(aims_mm: dict, truth: dict, pixel_mm: float, frames) -> dict:
+    """The aims' distance (mm) to the true section's centroid over ``frames``: mean and max."""
+    from hifumotion.metrics import centroid
+
+    frames = [f for f in frames if f in aims_mm and f in truth and truth[f].any()]
+    if not frames:
+        return {"frames": 0}
+    d = [float(np.linalg.norm(np.asarray(aims_mm[f], float) - centroid(truth[f], pixel_mm))) for f in frames]
+    return {"frames": len(frames), "centroid_mean_mm": float(np.mean(d)), "centroid_max_mm": float(np.max(d))}
+
+
 def margin_over(masks: dict, baseline: dict, truth: dict, pixel_mm: float, frames) -> dict:
     """The prediction's margin over a baseline frame by frame: DSC(pred) − DSC(baseline) and
     centroid error (baseline − pred, mm), each's mean and spread (standard deviation over the
@@ -75,7 +86,7 @@ class Evaluation:
     baselines: dict                       # method -> validation summary
     online: dict = field(default_factory=dict)   # horizon (frames, as str) -> method -> summary
     baseline_masks: dict = field(default_factory=dict)   # method -> frame -> mask (validation)
-    online_masks: dict = field(default_factory=dict)     # horizon -> frame t + k -> the physics' online mask
+    online_predictions: object = None     # prediction.pipeline.OnlinePredictions: the physics' online masks and aims
 
     def as_dict(self) -> dict:
         return {"physics": self.physics, "baselines_validation": self.baselines, "online": self.online,
@@ -169,18 +180,21 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
                                                            validation))
 
     online: dict = {}
-    physics_online: dict = {}
+    physics_online = None
     n = len(tracked)
     now = [int(t) for t in online_from]
     if horizons and now:
+        from hifumotion.metrics import centroid
+
         physics_online = online_predictions(pred, spec, reference, tracked, list(horizons), now)
         ncc = ncc_track(images, tracked[0])
         if program is not None:
-            surrogate = _online_surrogate(tracked, program, frame_interval_s, pixel, horizons, training)
+            surrogate, surrogate_aims = _online_surrogate(tracked, program, frame_interval_s, pixel, horizons,
+                                                          training)
         for h in horizons:
-            targets = [t + h for t in now if t + h < n and t + h in physics_online[h] and t + h in truth]
+            targets = [t + h for t in now if t + h < n and t + h in physics_online.masks[h] and t + h in truth]
             entry: dict = {"horizon_frames": int(h), "horizon_ms": 1000.0 * h * frame_interval_s}
-            entry["physics"] = summary(physics_online[h], truth, pixel, targets)
+            entry["physics"] = summary(physics_online.masks[h], truth, pixel, targets)
             entry["no_motion"] = summary({t + h: tracked[t] for t in now}, truth, pixel, targets)
             entry["ncc"] = summary({t + h: ncc[t] for t in now if t in ncc}, truth, pixel, targets)
             kalman = {}
@@ -189,9 +203,16 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
                     past = {f: tracked[f] for f in range(max(0, t - 10), t + 1)}
                     kalman.update(kalman_predict(past, [t + h], frame_interval_s, pixel))
             entry["kalman"] = summary(kalman, truth, pixel, targets)
+            # the aims: where each predictor puts the centroid, before its mask rounds it to the pixel grid
+            aims = {"physics": physics_online.aims_mm[h],
+                    "no_motion": {t + h: centroid(tracked[t], pixel) for t in now if t + h in targets},
+                    "kalman": {f: centroid(m, pixel) for f, m in kalman.items() if m.any()}}
             if program is not None:
                 entry["surrogate"] = summary({t + h: surrogate(t, h) for t in now if t + h in targets},
                                              truth, pixel, targets)
+                aims["surrogate"] = {t + h: surrogate_aims[h][t] for t in now
+                                     if t + h in targets and np.isfinite(surrogate_aims[h][t]).all()}
+            entry["aim"] = {name: aim_summary(a, truth, pixel, targets) for name, a in aims.items()}
             online[str(h)] = entry
     return Evaluation(table, physics, baselines, online, masks, physics_online)
 
@@ -231,7 +252,8 @@ def _choice_on_validation(masks: dict, chosen: str, rank: list[dict], truth: dic
 def _online_surrogate(tracked: np.ndarray, program: np.ndarray, frame_interval_s: float, pixel_mm: float, horizons,
                       training):
     """The online surrogate over the tracked frames (causal: the aim at t from frames ≤ t), its
-    memory the training window's span: ``(t, k) -> mask`` (the tracked frame t moved to the aim)."""
+    memory the training window's span: ``(t, k) -> mask`` (the tracked frame t moved to the aim)
+    and the aims themselves (horizon k → ``(T, 2)`` mm, the aim made at t for t + k)."""
     from hifumotion.metrics import centroid
     from hifumotion.prediction.surrogates import online_drive_regression, shift_mask
 
@@ -242,7 +264,7 @@ def _online_surrogate(tracked: np.ndarray, program: np.ndarray, frame_interval_s
     def mask(t: int, k: int) -> np.ndarray:
         shift = aims[k][t] - c[t]
         return shift_mask(tracked[t], shift, pixel_mm) if np.isfinite(shift).all() else tracked[t]
-    return mask
+    return mask, aims
 
 
 def online_schedule(training, validation, horizons, n_frames: int, samples: int = 40) -> tuple[list[int], list[int]]:
@@ -257,4 +279,4 @@ def online_schedule(training, validation, horizons, n_frames: int, samples: int 
     return now, keep
 
 
-__all__ = ["Evaluation", "evaluate", "summary", "margin_over", "online_schedule", "peer_scores", "ranking", "verdict"]
+__all__ = ["Evaluation", "aim_summary", "evaluate", "summary", "margin_over", "online_schedule", "peer_scores", "ranking", "verdict"]

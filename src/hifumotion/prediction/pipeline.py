@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,10 +23,26 @@ from hifumotion.prediction.masks import shift_mask
 from hifumotion.prediction.physics import Prediction, predict_frames, predicted_mask
 
 
+@dataclass
+class OnlinePredictions:
+    """The online mode's predictions: per horizon k, per frame t + k, the model's section moved onto
+    the tracked one (a mask), and the aim (mm, image axes): the tracked centroid at t carried by the
+    model's motion of its aim point (the frame-0 centroid as a material point) from t to t + k.
+
+    The aim is what the operator steers by. A binary mask realises a position only to the pixel
+    grid's quantisation: a disc of 25 px radius moved by 0.65 px has its pixel centroid moved by
+    0.74 px, and a section's straight edge (its face on the floor) moves by whole rows — so the
+    aim's motion is taken from the material point, not from the model's masks."""
+
+    masks: dict = field(default_factory=dict)       # k -> {t + k: bool (H, W)}
+    aims_mm: dict = field(default_factory=dict)     # k -> {t + k: (2,) mm}
+
+
 def online_predictions(pred: Prediction, spec, reference, observed_masks: np.ndarray, horizons_frames,
-                       now_frames) -> dict[int, dict[int, np.ndarray]]:
-    """``{k: {t + k: mask}}``: at each ``t`` in ``now_frames`` the model's section of t + k, moved by
-    the offset between the observed and the model's section at t (model masks from ``pred.run``)."""
+                       now_frames) -> OnlinePredictions:
+    """At each ``t`` in ``now_frames`` and each horizon k, the model's section of t + k moved by
+    the offset between the observed and the model's section at t (model masks from ``pred.run``),
+    and the aim (:class:`OnlinePredictions`)."""
     run = pred.run
     cache: dict[int, np.ndarray] = {}
 
@@ -34,7 +51,7 @@ def online_predictions(pred: Prediction, spec, reference, observed_masks: np.nda
             cache[f] = predicted_mask(run.kept[f], run.rest_mm, spec.spacing_mm, reference)
         return cache[f]
 
-    out: dict[int, dict[int, np.ndarray]] = {int(k): {} for k in horizons_frames}
+    out = OnlinePredictions({int(k): {} for k in horizons_frames}, {int(k): {} for k in horizons_frames})
     for t in now_frames:
         if not observed_masks[t].any() or t not in run.kept:
             continue
@@ -42,27 +59,27 @@ def online_predictions(pred: Prediction, spec, reference, observed_masks: np.nda
         if not m_t.any():
             continue
         offset = centroid(observed_masks[t]) - centroid(m_t)   # (x, y) px
+        seen_mm = centroid(observed_masks[t], pred.pixel_mm)
         for k in horizons_frames:
             f = t + int(k)
-            if f in run.kept:
-                out[int(k)][f] = shift_mask(model_mask(f), offset)
+            if f in run.kept and model_mask(f).any():
+                out.masks[int(k)][f] = shift_mask(model_mask(f), offset)
+                if f < len(pred.aim_mm):
+                    out.aims_mm[int(k)][f] = seen_mm + pred.aim_mm[f] - pred.aim_mm[t]
     return out
 
 
-def online_csv(predictions: dict[int, dict[int, np.ndarray]], observed_masks: np.ndarray, pixel_mm: float,
+def online_csv(predictions: OnlinePredictions, observed_masks: np.ndarray, pixel_mm: float,
                frame_interval_s: float) -> str:
     """``horizon_frames, horizon_ms, frame, predicted_x_mm, predicted_y_mm, tracked_x_mm, tracked_y_mm, error_mm``:
-    the online predictions' centroids against the tracked section of the same frame (when there is one)."""
+    the online aims (the predicted centroids) against the tracked section of the same frame (when there is one)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["horizon_frames", "horizon_ms", "frame", "predicted_x_mm", "predicted_y_mm", "tracked_x_mm",
                 "tracked_y_mm", "error_mm"])
-    for k in sorted(predictions):
-        for f in sorted(predictions[k]):
-            m = predictions[k][f]
-            if not m.any():
-                continue
-            p = centroid(m, pixel_mm)
+    for k in sorted(predictions.aims_mm):
+        for f in sorted(predictions.aims_mm[k]):
+            p = np.asarray(predictions.aims_mm[k][f], float)
             row = [k, f"{1000 * k * frame_interval_s:.1f}", f, f"{p[0]:.4f}", f"{p[1]:.4f}"]
             if f < len(observed_masks) and observed_masks[f].any():
                 o = centroid(observed_masks[f], pixel_mm)
@@ -163,5 +180,5 @@ def write_prediction_folder(folder: str | Path, pred: Prediction, frames, frame_
     return summary
 
 
-__all__ = ["write_prediction_folder", "online_predictions", "online_csv", "predict_calibrated", "write_prediction", "write_particles", "aim_csv",
+__all__ = ["OnlinePredictions", "write_prediction_folder", "online_predictions", "online_csv", "predict_calibrated", "write_prediction", "write_particles", "aim_csv",
            "shift_mask"]

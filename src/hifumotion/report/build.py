@@ -207,18 +207,25 @@ def _baseline_parts(outcome, folder: Path) -> list[str]:
                    if all(m in e for e in ev.online.values())]
         label = {"physics": "physics", "no_motion": "no motion", "ncc": "NCC", "kalman": "Kalman",
                  "surrogate": "surrogate"}
+        aimed = [m for m in methods if all(m in e.get("aim", {}) for e in ev.online.values())]
         rows = []
         for h, e in sorted(ev.online.items(), key=lambda kv: int(kv[0])):
             rows.append([f"{e['horizon_frames']} frames ({e['horizon_ms']:.0f} ms)"]
                         + [e[m].get("dsc_mean") for m in methods]
-                        + [e[m].get("centroid_mean_mm") for m in methods])
+                        + [e[m].get("centroid_mean_mm") for m in methods]
+                        + [e["aim"][m].get("centroid_mean_mm") for m in aimed])
         parts.append("<h3>Online mode</h3>")
         parts.append(paragraph("At each frame t, knowing the frames up to t, predict frame t + k: the physics "
                                "re-anchored on the tracked frame t, holding frame t, the NCC template tracker, "
                                "a Kalman filter over the last ten frames and, where the program is known, the "
                                "drive surrogate updated at every frame (recursive least squares)."))
+        if aimed:
+            parts.append(paragraph("The aim columns score where each predictor puts the centroid, before its "
+                                   "mask rounds it to the pixel grid (a straight edge, such as the face on the "
+                                   "floor, moves by whole rows): what the operator steers by."))
         parts.append(table(["horizon"] + [f"DSC {label[m]}" for m in methods]
-                           + [f"centroid {label[m]} (mm)" for m in methods], rows,
+                           + [f"centroid {label[m]} (mm)" for m in methods]
+                           + [f"aim {label[m]} (mm)" for m in aimed], rows,
                            "Online prediction error against the horizon"))
         parts.append(figure(figures.online_horizons(ev.online, folder / "online.png").name,
                             "Online mode: error against the horizon"))

@@ -236,9 +236,9 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
 
             write_chosen(folder / "chosen", choice.winner, ev.baseline_masks[choice.winner],
                          observed.frame_interval_s, float(observed.pixel_mm))
-        if ev.online_masks:
-            write_text(folder / "online.csv", online_csv(ev.online_masks, observation.frame_masks, pred.pixel_mm,
-                                                         observed.frame_interval_s))
+        if ev.online_predictions is not None:
+            write_text(folder / "online.csv", online_csv(ev.online_predictions, observation.frame_masks,
+                                                         pred.pixel_mm, observed.frame_interval_s))
         scores = out / "scores"
         write_text(scores / "table4.csv", ev.table.to_csv())
         write_json(scores / "scores.json", {"truth": truth_kind, "pixel_mm": pred.pixel_mm,
