@@ -22,7 +22,7 @@ import numpy as np
 def main() -> None:
     import trimesh
 
-    from hifumotion.creep import CreepMaterial, CreepSolver, Plane, Punch, Surroundings, voxel_mesh
+    from hifumotion.creep import CreepMaterial, CreepSolver, ContactPlane, Punch, Surroundings, voxel_mesh
     from hifumotion.creep.voxels import conform
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -49,7 +49,7 @@ def main() -> None:
         punch = Punch((0.02, top * 1e-3, 0.02), (0.0, -1.0, 0.0), r_mm * 1e-3,
                       lambda t: force if t > 0 else 0.0, friction=0.0)
         solver = CreepSolver(mesh, CreepMaterial(e, nu, beta1=0.0, density_kg_m3=1e-3), Surroundings((0, 0, 0)),
-                             [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch)
+                             [ContactPlane((0, 0, 0), (0, 1, 0), 0.0)], punch)
         t0 = time.perf_counter()
         result = solver.run(np.array([0.0, 0.5]))
         rows.append({"spacing_mm": dx, "radius_over_spacing": r_mm / dx, "voxels": len(pts),

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hifumotion.creep import CreepMaterial, CreepSettings, CreepSolver, Plane, Punch, Surroundings, voxel_mesh
+from hifumotion.creep import CreepMaterial, CreepSettings, CreepSolver, ContactPlane, Punch, Surroundings, voxel_mesh
 from hifumotion.errors import InputError
 
 MM = 1e-3
@@ -29,7 +29,7 @@ def pressed_block(n, e, nu, force, beta1=0.0, beta2=0.0, friction=0.0, gravity=(
                       schedule or (lambda t: force if t > 0 else 0.0), friction)
     solver = CreepSolver(mesh, CreepMaterial(e, nu, beta1=beta1, beta2=beta2, density_kg_m3=density,
                                              rate_floor_per_s=1e-12),
-                         Surroundings(gravity), [Plane((0, 0, 0), (0, 1, 0), friction)], punch, settings)
+                         Surroundings(gravity), [ContactPlane((0, 0, 0), (0, 1, 0), friction)], punch, settings)
     return mesh, solver.run(np.asarray(times))
 
 
@@ -52,7 +52,7 @@ def test_block_under_its_weight_sinks_by_the_analytic_amount_and_not_into_the_fl
         mesh = voxel_mesh(block(n, dx), dx)
         rho, g, e = 1000.0, 9.81, 2e3
         solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho), Surroundings((0, -g, 0)),
-                             [Plane((0, 0, 0), (0, 1, 0), 0.5)], None)
+                             [ContactPlane((0, 0, 0), (0, 1, 0), 0.5)], None)
         r = solver.run(np.array([0.0, 0.1]))
         h = n * dx * MM
         top = mesh.nodes_mm[:, 1] > n * dx - 1e-9
@@ -75,7 +75,7 @@ def test_a_round_bottomed_sample_settles_into_an_equilibrium_that_then_holds():
     material = dataclasses.replace(scene_material(scene), beta1=0.0)
     water = scene.tank.water_depth_mm * MM     # buoyant: the floor's few nodes carry little
     solver = CreepSolver(mesh, material, Surroundings((0.0, -9.81, 0.0), 1000.0, water),
-                         [Plane((0, 0, 0), (0, 1, 0), 3.0)], None)
+                         [ContactPlane((0, 0, 0), (0, 1, 0), 3.0)], None)
     r = solver.run(np.array([0.0, 0.5, 1.0]))
     sag = np.abs(r.nodes_mm[0] - mesh.nodes_mm).max()
     assert sag > 0.1                                             # it did settle
@@ -167,7 +167,7 @@ def test_a_released_bar_rests_on_the_block_as_it_creeps_back_by_the_kelvin_voigt
                   lambda t: force if 0 < t <= t1 else 0.0, 0.0, (t1,))
     # its weight (a hundredth of the push) keeps the block on the floor as it springs back
     solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=mu, beta2=0.0, density_kg_m3=1000.0, rate_floor_per_s=1e-12),
-                         Surroundings((0.0, -9.81, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch,
+                         Surroundings((0.0, -9.81, 0.0)), [ContactPlane((0, 0, 0), (0, 1, 0), 0.0)], punch,
                          CreepSettings(tolerance=0.001))
     times = t1 + np.array([0.0, 0.5, 1.0, 2.0, 3.0]) * tau
     r = solver.run(np.r_[0.0, times])
@@ -257,8 +257,8 @@ def test_bad_input_is_refused_with_a_named_field():
         voxel_mesh(np.zeros((2, 3)), 1.0)
     mesh = voxel_mesh(block(2), 1.0)
     with pytest.raises(InputError, match="Poisson"):
-        CreepSolver(mesh, CreepMaterial(1e3, 0.5), Surroundings(), [Plane((0, 0, 0), (0, 1, 0))], None)
-    solver = CreepSolver(mesh, CreepMaterial(1e3, 0.3), Surroundings(), [Plane((0, 0, 0), (0, 1, 0))], None)
+        CreepSolver(mesh, CreepMaterial(1e3, 0.5), Surroundings(), [ContactPlane((0, 0, 0), (0, 1, 0))], None)
+    solver = CreepSolver(mesh, CreepMaterial(1e3, 0.3), Surroundings(), [ContactPlane((0, 0, 0), (0, 1, 0))], None)
     with pytest.raises(InputError, match="increasing"):
         solver.run(np.array([1.0, 0.5]))
 
@@ -277,7 +277,7 @@ def test_clamped_beam_sags_as_beam_theory_says():
         pts = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) / MM + np.array([0.0, 20.0, 0.0])
         mesh = voxel_mesh(pts, dx / MM)
         solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho), Surroundings((0, -g, 0)),
-                             [Plane((0, 0, 0), (1, 0, 0), bonded=True)], None)
+                             [ContactPlane((0, 0, 0), (1, 0, 0), bonded=True)], None)
         r = solver.run(np.array([0.0, 0.1]))
         tip = mesh.nodes_mm[:, 0] > length / MM - 1e-6
         sag = -(r.nodes_mm[0][tip, 1] - mesh.nodes_mm[tip, 1]).mean() * MM
@@ -316,7 +316,7 @@ def test_a_block_pushed_along_a_rough_floor_sticks_below_coulombs_limit_and_slid
         force = ratio * max(mu, 0.5) * mass * g
         punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
         solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho), Surroundings((0.0, -g, 0.0)),
-                             [Plane((0, 0, 0), (0, 1, 0), mu)], punch, CreepSettings(tolerance=1e-4))
+                             [ContactPlane((0, 0, 0), (0, 1, 0), mu)], punch, CreepSettings(tolerance=1e-4))
         times = np.array([0.0, 0.01, 0.02])
         r = solver.run(times)
         if force < mu * mass * g:
@@ -351,7 +351,7 @@ def test_a_tilted_bar_drives_a_stiff_block_along_a_rough_floor_as_a_rigid_wedge(
     punch = Punch(tuple(tip), tuple(axis), radius, lambda t: 0.0, face_mu, (), travel_m=lambda t: travel_m * t)
     mesh = voxel_mesh(block(n), 1.0)
     solver = CreepSolver(mesh, CreepMaterial(e, 0.3, beta1=0.0, density_kg_m3=rho), Surroundings((0.0, -g, 0.0)),
-                         [Plane((0, 0, 0), (0, 1, 0), floor_mu)], punch, CreepSettings(tolerance=1e-4))
+                         [ContactPlane((0, 0, 0), (0, 1, 0), floor_mu)], punch, CreepSettings(tolerance=1e-4))
     r = solver.run(np.linspace(0.0, 1.0, 6))
     x_mm = (r.nodes_mm[:, :, 0] - mesh.nodes_mm[None, :, 0]).mean(1)
     sliding = slice(2, None)          # past the elastic stick's onset
@@ -374,7 +374,7 @@ def test_the_blockwise_reduction_is_the_sparse_product():
     mesh = voxel_mesh(block(n), 1.0)
     axis = np.array([0.3, -1.0, 0.2]) / np.linalg.norm([0.3, -1.0, 0.2])
     punch = Punch((2 * MM, 4 * MM, 2 * MM), tuple(axis), 10 * MM, lambda t: 0.1, 0.5)
-    planes = [Plane((0, 0, 0), (0, 1, 0), 0.5), Plane((0, 0, 0), (1, 0, 0), 0.5, bonded=True)]
+    planes = [ContactPlane((0, 0, 0), (0, 1, 0), 0.5), ContactPlane((0, 0, 0), (1, 0, 0), 0.5, bonded=True)]
     solver = CreepSolver(mesh, CreepMaterial(1e4, 0.45, beta1=1e3, beta2=0.5), Surroundings(), planes, punch)
     rest = solver.rest_m
     cs = solver.contacts
@@ -493,7 +493,7 @@ def test_a_driven_bar_takes_the_force_its_travel_needs_and_the_block_its_poisson
     punch = Punch((n / 2 * MM, n * MM, n / 2 * MM), (0.0, -1.0, 0.0), 10 * n * MM, lambda t: 0.0, 0.0,
                   travel_m=lambda t: travel_m if t > 0 else 0.0)
     solver = CreepSolver(mesh, CreepMaterial(e, nu, beta1=0.0, beta2=0.0, density_kg_m3=1e-3, rate_floor_per_s=1e-12),
-                         Surroundings((0.0, 0.0, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch)
+                         Surroundings((0.0, 0.0, 0.0)), [ContactPlane((0, 0, 0), (0, 1, 0), 0.0)], punch)
     r = solver.run(np.array([0.0, 0.5]))
     assert r.advance_mm[-1] == pytest.approx(travel_m / MM, rel=1e-12)
     assert r.bar_force_n[-1] == pytest.approx(e * (n * MM) ** 2 * travel_m / (n * MM), rel=1e-6)
@@ -514,7 +514,7 @@ def test_a_bar_driven_at_a_steady_rate_takes_the_kelvin_voigt_force_in_full_and_
     material = CreepMaterial(e, 0.0, beta1=mu, beta2=0.0, density_kg_m3=1e-3, rate_floor_per_s=1e-12)
     punch = Punch((n / 2 * MM, n * MM, n / 2 * MM), (0.0, -1.0, 0.0), 10 * n * MM, lambda t: 0.0, 0.0,
                   travel_m=lambda t: rate * t)
-    full = CreepSolver(mesh, material, Surroundings((0.0, 0.0, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch,
+    full = CreepSolver(mesh, material, Surroundings((0.0, 0.0, 0.0)), [ContactPlane((0, 0, 0), (0, 1, 0), 0.0)], punch,
                        CreepSettings(tolerance=0.001))
     r = full.run(times)
     area_over_height = (n * MM) ** 2 / (n * MM)
@@ -543,7 +543,7 @@ def test_the_reduced_model_creeps_by_the_kelvin_voigt_law_under_a_force_its_snap
 
     def solver_at(f):
         punch = Punch((n / 2 * MM, n * MM, n / 2 * MM), (0.0, -1.0, 0.0), 10 * n * MM, lambda t: f if t > 0 else 0.0)
-        return CreepSolver(mesh, material, Surroundings((0.0, 0.0, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch,
+        return CreepSolver(mesh, material, Surroundings((0.0, 0.0, 0.0)), [ContactPlane((0, 0, 0), (0, 1, 0), 0.0)], punch,
                            CreepSettings(tolerance=0.001))
 
     full = solver_at(force)
@@ -567,7 +567,7 @@ def _rough_floor_block(mu: float):
 
     def solver_at(force):
         punch = Punch((0.0, side / 2, side / 2), (1.0, 0.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
-        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), mu)], punch,
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [ContactPlane((0, 0, 0), (0, 1, 0), mu)], punch,
                            CreepSettings(tolerance=1e-4))
 
     return (mesh, material, rho * side ** 3, g, CreepSettings().stick_mm, np.array([0.0, 0.005, 0.01, 0.015, 0.02]),
@@ -651,7 +651,7 @@ def test_the_balanced_floor_reactions_carry_the_weight_and_the_push():
 
     def solver_at(force):
         punch = Punch((side / 2, side, side / 2), (0.0, -1.0, 0.0), 10 * side, lambda t, f=force: f if t > 0 else 0.0, 0.0)
-        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), mu)], punch,
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [ContactPlane((0, 0, 0), (0, 1, 0), mu)], punch,
                            CreepSettings(tolerance=1e-4))
 
     push = 3 * mass * g
@@ -709,7 +709,7 @@ def test_the_bars_rim_is_rounded_at_its_own_edge_or_half_a_spacing_whichever_is_
     punch = Punch((1.5 * MM, 3 * MM, 1.5 * MM), (0.0, -1.0, 0.0), 5 * MM, lambda t: 0.0, 0.0,
                   edge_radius_m=None if own_mm is None else own_mm * MM)
     solver = CreepSolver(mesh, CreepMaterial(1e4, 0.3), Surroundings((0.0, 0.0, 0.0)),
-                         [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch)
+                         [ContactPlane((0, 0, 0), (0, 1, 0), 0.0)], punch)
     assert solver.punch.edge_radius_m == pytest.approx(expected_mm * MM)
 
 
@@ -733,7 +733,7 @@ def test_nodes_that_stay_on_the_floor_and_the_bars_face_in_every_snapshot_are_he
 
     def solver(travel_m):
         punch = Punch(tuple(tip), tuple(axis), radius, lambda t: 0.0, 0.1, (), travel_m=lambda t: travel_m * t)
-        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [Plane((0, 0, 0), (0, 1, 0), 0.2)], punch,
+        return CreepSolver(mesh, material, Surroundings((0.0, -g, 0.0)), [ContactPlane((0, 0, 0), (0, 1, 0), 0.2)], punch,
                            CreepSettings(tolerance=1e-4))
 
     times = np.linspace(0.0, 1.0, 11)
@@ -785,7 +785,7 @@ def test_the_bars_rows_bound_its_rounded_solids_distance_from_below_and_touch_it
     axis = np.array([math.sin(0.6), -math.cos(0.6), 0.0])
     punch = Punch((2.5 * MM, 4.2 * MM, 2.0 * MM), tuple(axis), 1.5 * MM, lambda t: 0.0, 0.0, edge_radius_m=0.6 * MM)
     solver = CreepSolver(mesh, CreepMaterial(1e4, 0.3), Surroundings((0.0, 0.0, 0.0)),
-                         [Plane((0, 0, 0), (0, 1, 0), 0.0)], punch)
+                         [ContactPlane((0, 0, 0), (0, 1, 0), 0.0)], punch)
     rng = np.random.default_rng(11)
     n, r = len(mesh.nodes_mm), 5
     modes = rng.normal(scale=0.4 * MM, size=(n, 3, r))
@@ -910,7 +910,7 @@ def _cantilever_tip(alpha: float, kind: str, length=0.08, height=0.01, width=0.0
     mesh = voxel_mesh(pts, dx / MM)
     tip = mesh.nodes_mm[:, 0] > length / MM - 1e-6
     solver = CreepSolver(mesh, CreepMaterial(e, 0.0, beta1=0.0, density_kg_m3=rho), Surroundings((0, -g, 0)),
-                         [Plane((0, 0, 0), (1, 0, 0), bonded=True)], None, CreepSettings(kinematics=kind))
+                         [ContactPlane((0, 0, 0), (1, 0, 0), bonded=True)], None, CreepSettings(kinematics=kind))
     r = solver.run(np.array([0.0, 0.1]))
     return (r.nodes_mm[-1][tip] - mesh.nodes_mm[tip]).mean(axis=0) * MM / length
 
@@ -963,7 +963,7 @@ def test_the_reduced_corotational_model_bends_a_cantilever_as_the_elastica_on_a_
                              beta1=0.0, density_kg_m3=rho)
 
     def solver(alpha, kind):
-        return CreepSolver(mesh, material(alpha), Surroundings((0, -g, 0)), [Plane((0, 0, 0), (1, 0, 0), bonded=True)],
+        return CreepSolver(mesh, material(alpha), Surroundings((0, -g, 0)), [ContactPlane((0, 0, 0), (1, 0, 0), bonded=True)],
                            None, CreepSettings(kinematics=kind))
 
     runs = []
@@ -1128,6 +1128,6 @@ def test_the_reduced_model_refuses_a_neo_hookean_solver_by_name():
     from hifumotion.creep.reduced import ReducedCreep
 
     solver = CreepSolver(voxel_mesh(block(3), 1.0), CreepMaterial(5e3, 0.45), Surroundings((0, -9.81, 0)),
-                         [Plane((0, 0, 0), (0, 1, 0))], None, CreepSettings(kinematics="neo_hooke"))
+                         [ContactPlane((0, 0, 0), (0, 1, 0))], None, CreepSettings(kinematics="neo_hooke"))
     with pytest.raises(InputError, match="kinematics"):
         ReducedCreep(solver, None)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hifumotion.creep.contact import ContactSet, Plane, Punch
+from hifumotion.creep.contact import ContactSet, ContactPlane, Punch
 
 RADIUS_M = 3e-3
 EDGE_M = 0.8e-3
@@ -24,7 +24,7 @@ E2 = np.cross(AXIS, E1)
 def _set(points_m: np.ndarray, edge_m: float = EDGE_M) -> ContactSet:
     punch = Punch(tip_m=tuple(TIP_M), axis=tuple(AXIS), radius_m=RADIUS_M, force_n=lambda t: 0.0, friction=0.3,
                   edge_radius_m=edge_m)
-    floor = Plane(point_m=(0.0, -1.0, 0.0), normal=(0.0, 1.0, 0.0))   # far below: never the nearest
+    floor = ContactPlane(point_m=(0.0, -1.0, 0.0), normal=(0.0, 1.0, 0.0))   # far below: never the nearest
     return ContactSet(points_m, [floor], punch)
 
 

@@ -15,7 +15,7 @@ import pytest
 
 from hifumotion.estimation.protocol import default_frames
 from hifumotion.report.html import figure, missing_files, page, referenced_files
-from hifumotion.workflow.user_run import RunConfig, example_text
+from hifumotion.workflow.user_run import UserRunConfig, example_text
 
 EXAMPLE = example_text()
 
@@ -38,7 +38,7 @@ def test_missing_files_names_exactly_the_pictures_that_are_not_there(tmp_path):
 def test_the_printed_example_configuration_is_valid():
     printed = _cli("run", "--example", timeout=60)
     assert printed.returncode == 0 and printed.stdout == EXAMPLE     # unwrapped, on stdout: "> run.toml"
-    cfg = RunConfig.model_validate(tomllib.loads(printed.stdout))
+    cfg = UserRunConfig.model_validate(tomllib.loads(printed.stdout))
     assert cfg.estimation.training_frames == "20:101:10" and cfg.bar.tip_at_rest_mm[1] == 19.0
     assert default_frames(200) == ([*range(20, 101, 10)], [*range(110, 191, 10)])
 

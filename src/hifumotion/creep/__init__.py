@@ -15,7 +15,7 @@ from hifumotion._lazy import lazy_exports
 # names → the module that defines them, imported on first use: the solvers pull Numba, SciPy
 # and PARDISO, which a command that only reads the settings (``--help``, a configuration's
 # validation) should not pay for
-_WHERE = {"Plane": "contact", "Punch": "contact", "CreepMaterial": "integrate", "CreepResult": "integrate",
+_WHERE = {"ContactPlane": "contact", "Punch": "contact", "CreepMaterial": "integrate", "CreepResult": "integrate",
           "CreepSolver": "integrate", "Surroundings": "integrate", "CreepSettings": "settings",
           "ReducedSettings": "settings", "VoxelMesh": "voxels", "voxel_mesh": "voxels"}
 

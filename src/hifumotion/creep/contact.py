@@ -104,7 +104,7 @@ def friction_linearised(nodes: np.ndarray, anchor_t: np.ndarray, d0_m: np.ndarra
 
 
 @dataclass(frozen=True)
-class Plane:
+class ContactPlane:
     """A rigid plane the tissue stays on the ``normal`` side of (m; unit normal).
 
     ``bonded``: nodes that touch it are held for good (a clamp: never released, never slip).
@@ -164,7 +164,7 @@ class ContactSet:
     its last normal reaction (N); ``fresh[i]``: touched, its first reaction not yet known.
     """
 
-    def __init__(self, rest_m: np.ndarray, planes: list[Plane], punch: Punch | None):
+    def __init__(self, rest_m: np.ndarray, planes: list[ContactPlane], punch: Punch | None):
         self.rest = np.asarray(rest_m, float)
         n = len(self.rest)
         self.planes = list(planes)
@@ -433,5 +433,5 @@ def _bar_distances(x, tip, a, across_unit, core_m, rim_m, distance, normal):
         distance[i] = bar_point(x[i, 0], x[i, 1], x[i, 2], tip, a, across_unit, core_m, rim_m, normal[i])
 
 
-__all__ = ["Plane", "Punch", "ContactSet", "FrictionLinearised", "friction_force", "friction_linearised",
+__all__ = ["ContactPlane", "Punch", "ContactSet", "FrictionLinearised", "friction_force", "friction_linearised",
            "FREE", "STICK", "SLIP"]

@@ -47,7 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
-from hifumotion.creep.contact import SLIP, STICK, ContactSet, FrictionLinearised, Plane, Punch, friction_linearised
+from hifumotion.creep.contact import SLIP, STICK, ContactSet, FrictionLinearised, ContactPlane, Punch, friction_linearised
 from hifumotion.creep.corotation import Corotation
 from hifumotion.creep.neo_hooke import NeoHooke
 from hifumotion.creep.hexahedra import MeshMatrices, _positions
@@ -135,7 +135,7 @@ class CreepSolver:
     """Backward-Euler creep of a voxel mesh with contact constraints (module docstring)."""
 
     def __init__(self, mesh: VoxelMesh, material: CreepMaterial, surroundings: Surroundings,
-                 planes: list[Plane], punch: Punch | None, settings: CreepSettings | None = None):
+                 planes: list[ContactPlane], punch: Punch | None, settings: CreepSettings | None = None):
         self.mesh = mesh
         self.material = material
         self.settings = settings or CreepSettings()

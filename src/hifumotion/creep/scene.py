@@ -1,7 +1,7 @@
 """Run a :class:`~hifumotion.particles.scene.Scene` on the fast path.
 
 The same scene file as the explicit path: its tank (the floor and the four walls are
-:class:`~.contact.Plane` s with the scene's friction), its water (buoyancy up to the
+:class:`~.contact.ContactPlane` s with the scene's friction), its water (buoyancy up to the
 water line), its tissue (its particles, which must lie on a lattice, become voxels) and
 its bar (a :class:`~.contact.Punch` with the scene's force schedule; a bar whose weight
 is not supported adds its weight less its buoyancy to the push). Returns the explicit
@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from hifumotion.creep.contact import Plane, Punch
+from hifumotion.creep.contact import ContactPlane, Punch
 from hifumotion.creep.integrate import CreepMaterial, CreepResult, CreepSettings, CreepSolver, Surroundings
 from hifumotion.creep.voxels import conform, voxel_mesh
 from hifumotion.particles.scene import Scene, tissue_particles_mm, touching_tip
@@ -32,13 +32,13 @@ def scene_material(scene: Scene) -> CreepMaterial:
                          beta2=t.beta2, density_kg_m3=t.density_kg_m3, rate_floor_per_s=t.rate_floor_per_s)
 
 
-def tank_planes(scene: Scene) -> list[Plane]:
+def tank_planes(scene: Scene) -> list[ContactPlane]:
     """The floor (y = 0) and the four side walls of the tank, with the scene's friction."""
     lx, _, lz = (s * MM for s in scene.tank.size_mm)
     mu = scene.physics.friction
-    return [Plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), mu),
-            Plane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), mu), Plane((lx, 0.0, 0.0), (-1.0, 0.0, 0.0), mu),
-            Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), mu), Plane((0.0, 0.0, lz), (0.0, 0.0, -1.0), mu)]
+    return [ContactPlane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), mu),
+            ContactPlane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), mu), ContactPlane((lx, 0.0, 0.0), (-1.0, 0.0, 0.0), mu),
+            ContactPlane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), mu), ContactPlane((0.0, 0.0, lz), (0.0, 0.0, -1.0), mu)]
 
 
 def scene_punch(scene: Scene, tissue_mm: np.ndarray, spacing_mm: float) -> tuple[Punch | None, np.ndarray]:

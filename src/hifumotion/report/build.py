@@ -33,7 +33,7 @@ PARAMETER_ROWS = [
 
 
 @dataclass
-class SegmentationResult:
+class SegmentationSection:
     """One segmentation comparison for the report (see :mod:`hifumotion.segmentation.compare`)."""
 
     title: str
@@ -48,7 +48,7 @@ class ReportInputs:
     """Everything :func:`write_report` draws on besides the pipeline's outcome."""
 
     title: str = "hifumotion run"
-    segmentation: list[SegmentationResult] = field(default_factory=list)
+    segmentation: list[SegmentationSection] = field(default_factory=list)
     timings_s: dict = field(default_factory=dict)
     experiment_note: str = ""
     experiment_facts: dict = field(default_factory=dict)
@@ -85,7 +85,7 @@ def _copy(src: Path, folder: Path, name: str | None = None) -> str:
     return dst.name
 
 
-def _segmentation_parts(results: list[SegmentationResult], folder: Path) -> list[str]:
+def _segmentation_parts(results: list[SegmentationSection], folder: Path) -> list[str]:
     parts = [paragraph("Every method starts from the same initial contour on every image and is scored against "
                        "the reference masks: DSC (higher is better), MSSD, Hausdorff distance and its 95th "
                        "percentile in pixels (lower is better), and the time per image.")]
@@ -464,4 +464,4 @@ def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: 
     return write_text(folder / "report.html", page(inputs.title, intro, sections))
 
 
-__all__ = ["write_report", "ReportInputs", "SegmentationResult", "output_links"]
+__all__ = ["write_report", "ReportInputs", "SegmentationSection", "output_links"]

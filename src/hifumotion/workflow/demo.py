@@ -133,7 +133,7 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
     """Steps 1–5 of the module docstring into ``out`` (an output folder being written)."""
     from hifumotion.experiment.boundary_offset import measure_boundary_offset
     from hifumotion.io.dataset import Dataset, load_dataset
-    from hifumotion.report.build import ReportInputs, SegmentationResult, output_links, write_report
+    from hifumotion.report.build import ReportInputs, SegmentationSection, output_links, write_report
     from hifumotion.segmentation import METHODS
     from hifumotion.segmentation.compare import compare_methods, write_comparison
 
@@ -148,7 +148,7 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
                                           seed=settings.seed))
         cmp = compare_methods(data, methods, "points", progress=_items(tell, "segmentation (sweep)"))
         paths = write_comparison(cmp, out / "segmentation", tag="_sweep")
-        segmentation.append(SegmentationResult(
+        segmentation.append(SegmentationSection(
             f"The twin's sweep: {len(data)} planes, simulated B-mode against the true sections", cmp,
             paths["figure2"], paths["figure3"], "Initial contour: a clinician's 8 rough clicks on each plane."))
     folder = settings.dataset or default_dataset()
@@ -160,7 +160,7 @@ def run_demo(out: Path, settings: DemoSettings, record, progress: Progress | Non
             real = Dataset(real.root, real.items[: max(settings.dataset_images, 1)])
             cmp = compare_methods(real, methods, "points", progress=_items(tell, "segmentation (real images)"))
             paths = write_comparison(cmp, out / "segmentation", tag=f"_{Path(folder).name}")
-            segmentation.append(SegmentationResult(
+            segmentation.append(SegmentationSection(
                 f"Real ultrasound images with expert masks ({Path(folder).name}, {len(real)} images)", cmp,
                 paths["figure2"], paths["figure3"], "Initial contour: the dataset's clicked points (init.json)."))
 

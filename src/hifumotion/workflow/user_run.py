@@ -53,11 +53,11 @@ class GeometryConfig(ConfigModel):
     frames_plane_z_mm: float = Field(description="pool z in mm of the time series' imaging plane")
 
 
-class TruthConfig(ConfigModel):
+class ExpertMasksConfig(ConfigModel):
     masks: Path | None = Field(None, description="folder of expert masks frame_NNNN.png (0/255) on the frames' grid, to score against")
 
 
-class RunConfig(ConfigModel):
+class UserRunConfig(ConfigModel):
     """A ``hifumotion run`` configuration (TOML or YAML)."""
 
     output: Path | None = Field(None, description="output folder (default: given with -o)")
@@ -70,7 +70,7 @@ class RunConfig(ConfigModel):
     push: PushSchedule = Field(default_factory=PushSchedule, description="the shape of the push's force schedule")
     estimation: EstimationConfig = EstimationConfig()
     training_contours: Path | None = Field(None, description="CSV of expert contours of training frames (frame, x_px, y_px), used instead of the tracked contours")
-    truth: TruthConfig = TruthConfig()
+    truth: ExpertMasksConfig = ExpertMasksConfig()
 
     @model_validator(mode="after")
     def _positions(self):
@@ -80,9 +80,9 @@ class RunConfig(ConfigModel):
         return self
 
 
-def example_config() -> RunConfig:
+def example_config() -> UserRunConfig:
     """A complete, valid run configuration (the one ``hifumotion run --example`` prints)."""
-    return RunConfig(
+    return UserRunConfig(
         output=Path("results"),
         sweep=SweepConfig(path=Path("sweep/"), spacing_mm=0.2, gap_mm=1.0, first_z_mm=4.7),
         frames=FramesConfig(path=Path("cine.dcm"), frame_interval_s=0.05),
@@ -103,16 +103,16 @@ def example_text() -> str:
             + dump_toml(example_config()))
 
 
-def load_run_config(path: str | Path, settings: list[str] | None = None) -> tuple[RunConfig, Path]:
+def load_run_config(path: str | Path, settings: list[str] | None = None) -> tuple[UserRunConfig, Path]:
     """The configuration, with ``settings`` (``KEY=VALUE``: :func:`~hifumotion.config.apply_settings`)
     changed, and the folder its relative paths are relative to."""
     from hifumotion.config import apply_settings, read_config_file, validate_config
 
     p = Path(path)
-    return validate_config(RunConfig, apply_settings(read_config_file(p), settings), p), p.resolve().parent
+    return validate_config(UserRunConfig, apply_settings(read_config_file(p), settings), p), p.resolve().parent
 
 
-def run_inputs(cfg: RunConfig, base: Path) -> list[Path]:
+def run_inputs(cfg: UserRunConfig, base: Path) -> list[Path]:
     """Every file and folder a run configuration reads (resolved against ``base``)."""
     paths = [cfg.sweep.path, cfg.frames.path, cfg.initial_contour.path, cfg.training_contours, cfg.truth.masks]
     return [_resolve(base, p) for p in paths if p is not None]
@@ -135,7 +135,7 @@ def _as_uint8(frames: np.ndarray, flip: bool) -> np.ndarray:
     return out[:, ::-1, :].copy() if flip else out
 
 
-def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
+def assemble_observed(cfg: UserRunConfig, base: Path, folder: str | Path) -> Path:
     """Write the ``observed/`` layout (``setup.json``, ``sweep/``, ``frames/``, ``sweep_positions.csv``,
     ``initial_contour.csv``) from the user's files; every missing or inconsistent piece is one
     :class:`~hifumotion.errors.InputError` naming the file or field."""
@@ -198,7 +198,7 @@ def assemble_observed(cfg: RunConfig, base: Path, folder: str | Path) -> Path:
     return folder
 
 
-def run_user(cfg: RunConfig, base: Path, out: Path, record, progress: Progress | None = None) -> dict:
+def run_user(cfg: UserRunConfig, base: Path, out: Path, record, progress: Progress | None = None) -> dict:
     """Assemble ``out/observed``, run the pipeline, write ``out/report/report.html``."""
     from hifumotion.report.build import ReportInputs, output_links, write_report
     from hifumotion.scoring import read_frame_masks
@@ -219,4 +219,4 @@ def run_user(cfg: RunConfig, base: Path, out: Path, record, progress: Progress |
     return summary
 
 
-__all__ = ["run_inputs", "RunConfig", "example_config", "example_text", "load_run_config", "assemble_observed", "run_user"]
+__all__ = ["run_inputs", "UserRunConfig", "example_config", "example_text", "load_run_config", "assemble_observed", "run_user"]
