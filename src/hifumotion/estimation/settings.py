@@ -21,6 +21,7 @@ from pydantic import Field, field_validator, model_validator
 import numpy as np
 from annotated_types import Ge, Gt, Le
 
+from hifumotion.particles.solver import CFL
 from hifumotion.physical import TISSUE_DENSITY_KG_M3
 from hifumotion import paper
 from hifumotion.config import ConfigModel
@@ -40,7 +41,7 @@ class ModelSettings:
     support_factor: Annotated[float, Ge(1.5), Le(3.0)] = 2.0   # kernel support h in spacings
     mass_scaling: Annotated[float, Ge(1.0)] = 2.0e4    # inertia multiplier of the quasi-static push
     settle_periods: Annotated[float, Gt(0)] = 6.0      # settling time in 1/ω of the slowest elastic mode
-    cfl: Annotated[float, Gt(0), Le(1.0)] = 0.4        # safety factor on the time step
+    cfl: Annotated[float, Gt(0), Le(1.0)] = CFL        # safety factor on the time step
     max_step_s: Annotated[float, Gt(0)] = 5e-3         # largest time step (s)
     force_ramp_s: Annotated[float, Ge(0)] | None = None  # the force's linear rise (s); default: setup.json's push.ramp_s
     tissue_density_kg_m3: Annotated[float, Gt(0)] = TISSUE_DENSITY_KG_M3

@@ -26,6 +26,7 @@ from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
 from hifumotion.resources import MAX_FRAMES
 from hifumotion.particles.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
+from hifumotion.particles.solver import CFL
 from hifumotion import paper
 
 
@@ -93,7 +94,7 @@ class TwinRunConfig(ConfigModel):
     mass_scaling: float = Field(20000.0, ge=1.0, description="inertia multiplier of the quasi-static push (weights unchanged; see docs/decisions.md for the tolerance)")
     settle_s: float | None = Field(None, ge=0, description="damped settling under gravity before t = 0 in s; default: 6 periods' worth (6/ω) of the tissue's slowest elastic mode under the mass scaling")
     settle_damping_per_s: float | None = Field(None, ge=0, description="velocity damping while settling in 1/s; default: 2ω, critical damping of that mode")
-    cfl: float = Field(0.4, gt=0, le=1.0, description="safety factor on the time step")
+    cfl: float = Field(CFL, gt=0, le=1.0, description="safety factor on the time step")
     max_step_s: float = Field(5e-3, gt=0, description="largest time step in s")
     particle_frames_every: int = Field(5, ge=1, description="write every n-th frame's particles as VTU (all frames go to tissue_trajectory.npz)")
 

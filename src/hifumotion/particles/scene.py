@@ -39,7 +39,7 @@ from hifumotion.resources import MAX_FRAMES, check_memory
 from hifumotion.rheology import RATE_FLOOR_PER_S
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.rigid import piecewise_linear_schedule
-from hifumotion.particles.solver import SolverSettings
+from hifumotion.particles.solver import CFL, SolverSettings
 from hifumotion.particles.system import (CouplingParameters, FluidParameters, ParticleSystem,
                                          build_system, lattice, tank_walls)
 from hifumotion import paper
@@ -194,7 +194,7 @@ class RunConfig(ConfigModel):
     settle_s: float = Field(0.2, ge=0, description="settling under gravity (damped, bar held) before t = 0, in s")
     settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling, in 1/s")
     mass_scaling: float = Field(1.0, ge=1.0, description="inertia multiplier for quasi-static runs (weights unchanged)")
-    cfl: float = Field(0.4, gt=0, le=1.0, description="safety factor on the time step")
+    cfl: float = Field(CFL, gt=0, le=1.0, description="safety factor on the time step")
     max_step_s: float = Field(1e-3, gt=0, description="largest time step in s")
     write_vtu: bool = Field(True, description="write VTU files of the particles (with a PVD index)")
     vtu_every: int = Field(1, ge=1, description="write every n-th output frame as VTU")

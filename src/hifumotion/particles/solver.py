@@ -63,6 +63,11 @@ class SimulationDiverged(HifuError):
     """The simulation became unstable; the message names step, particles and limit."""
 
 
+#: Safety factor of the explicit step on its stability limit (the acoustic and elastic CFL
+#: conditions): one home for the particle solver, a scene's ``[run]`` and the fitted model.
+CFL = 0.4
+
+
 @dataclass(frozen=True)
 class SolverSettings:
     """Integration settings.
@@ -87,7 +92,7 @@ class SolverSettings:
         ``False`` takes it explicitly with the viscous limit ρ Δx²/(4 μ).
     """
 
-    cfl: float = 0.4
+    cfl: float = CFL
     max_step_s: float = 1e-3
     min_step_s: float = 1e-9
     mass_scaling: float = 1.0
