@@ -21,7 +21,7 @@ from pydantic import Field, field_validator, model_validator
 import numpy as np
 from annotated_types import Ge, Gt, Le
 
-from hifumotion.particles.solver import CFL
+from hifumotion.numerics import CFL
 from hifumotion.physical import TISSUE_DENSITY_KG_M3
 from hifumotion import paper
 from hifumotion.config import ConfigModel

@@ -26,7 +26,7 @@ from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
 from hifumotion.resources import MAX_FRAMES
 from hifumotion.particles.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
-from hifumotion.particles.solver import CFL
+from hifumotion.numerics import CFL
 from hifumotion import paper
 
 

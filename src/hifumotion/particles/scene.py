@@ -39,7 +39,8 @@ from hifumotion.resources import MAX_FRAMES, check_memory
 from hifumotion.rheology import RATE_FLOOR_PER_S
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.rigid import piecewise_linear_schedule
-from hifumotion.particles.solver import CFL, SolverSettings
+from hifumotion.numerics import CFL
+from hifumotion.particles.solver import SolverSettings
 from hifumotion.particles.system import (CouplingParameters, FluidParameters, ParticleSystem,
                                          build_system, lattice, tank_walls)
 from hifumotion import paper

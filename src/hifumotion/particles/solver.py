@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from hifumotion.errors import HifuError
+from hifumotion.numerics import CFL
 from hifumotion.particles import elastic, fluid, viscosity
 from hifumotion.particles.kernels import cubic_w
 from hifumotion.particles.neighbours import CellGrid
@@ -61,11 +62,6 @@ def likely_cause(why: int, phase: str) -> str:
 
 class SimulationDiverged(HifuError):
     """The simulation became unstable; the message names step, particles and limit."""
-
-
-#: Safety factor of the explicit step on its stability limit (the acoustic and elastic CFL
-#: conditions): one home for the particle solver, a scene's ``[run]`` and the fitted model.
-CFL = 0.4
 
 
 @dataclass(frozen=True)
