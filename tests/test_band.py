@@ -65,3 +65,29 @@ def test_older_calibrations_give_the_coordinates_errors_from_the_parameters():
             "fit": {"correlation": {"coordinates": NAMES, "matrix": np.eye(4).tolist()}}}
     cov = covariance_from_calibration(meta)
     assert cov["std"] == [pytest.approx(0.5), 0.03, None, 0.1]
+
+
+@pytest.mark.parametrize("bad", [
+    {"coordinates": NAMES, "std": ["a", 1, 1, 1], "matrix": np.eye(4).tolist()},
+    {"coordinates": NAMES, "std": [0.1] * 4, "matrix": [["x"] * 4] * 4},
+    {"coordinates": ["log_E", "nu", "log_beta1", "colour"], "std": [0.1] * 4, "matrix": np.eye(4).tolist()},
+    {"coordinates": "log_E", "std": 3, "matrix": 1},
+])
+def test_a_hand_edited_covariance_is_one_error_naming_it(bad):
+    with pytest.raises(InputError, match="correlation"):
+        least_determined_step(bad, SPACE.lower, SPACE.upper)
+
+
+def test_a_hand_edited_calibration_gives_no_covariance_rather_than_a_crash():
+    for meta in ({"fit": "none"}, {"fit": {"correlation": [1, 2]}}, []):
+        cov = covariance_from_calibration(meta)
+        assert cov == {} or cov.get("coordinates") is None
+        with pytest.raises(InputError, match="correlation"):
+            least_determined_step(cov, SPACE.lower, SPACE.upper)
+    # parameters without their errors: every coordinate unbounded, so the step is half the widest
+    # search range in relevance units (ln β1's: 10² … 10⁸)
+    cov = covariance_from_calibration({"parameters": 3, "fit": {"correlation": {
+        "coordinates": NAMES, "matrix": np.eye(4).tolist()}}})
+    assert cov["std"] == [None] * 4
+    step = least_determined_step(cov, SPACE.lower, SPACE.upper)
+    assert abs(step[2]) == pytest.approx(0.5 * (SPACE.upper[2] - SPACE.lower[2]), rel=1e-12)

@@ -53,14 +53,17 @@ def least_determined_step(covariance: dict, lower: np.ndarray, upper: np.ndarray
     writes it (``parameters.json``'s ``fit.correlation``; a ``null`` standard error: no data bound it)."""
     from hifumotion.estimation.fit import RELEVANCE
 
-    names = list(covariance.get("coordinates", []))
-    corr = np.asarray(covariance.get("matrix", []), float)
-    std = list(covariance.get("std") or [])
-    if not names or corr.shape != (len(names), len(names)) or len(std) != len(names) or len(lower) != len(names):
-        raise InputError(f"expected the standard errors and the {len(lower)} × {len(lower)} correlation of the "
-                         "fit's coordinates (a calibration made before they were stored: calibrate again)",
-                         "fit.correlation")
-    sd = np.array([np.inf if v is None else float(v) for v in std])
+    wanted = (f"expected the standard errors and the {len(lower)} × {len(lower)} correlation of the fit's "
+              "coordinates, as calibrate writes them")
+    try:
+        names = list(covariance.get("coordinates") or [])
+        corr = np.asarray(covariance.get("matrix") or [], float)
+        sd = np.array([np.inf if v is None else float(v) for v in (covariance.get("std") or [])])
+    except (AttributeError, TypeError, ValueError):
+        raise InputError(wanted, "fit.correlation") from None
+    if (not names or any(n not in RELEVANCE for n in names) or corr.shape != (len(names), len(names))
+            or len(sd) != len(names) or len(lower) != len(names)):
+        raise InputError(wanted, "fit.correlation")
     prior = 0.5 * (np.asarray(upper, float) - np.asarray(lower, float))
     sd = np.where(np.isfinite(sd), sd, prior)
     corr = np.where(np.isfinite(corr), corr, 0.0)
@@ -81,15 +84,18 @@ def covariance_from_calibration(meta: dict) -> dict:
     """``fit.correlation`` of a calibration's ``parameters.json`` (``meta``) with the coordinates'
     standard errors: stored there, or — in a calibration written before they were — taken from the
     parameters' own (``std / value`` for a log coordinate, as the calibration reported them)."""
-    cov = dict((meta.get("fit") or {}).get("correlation") or {})
-    if cov.get("std") is None and cov.get("coordinates"):
-        params = meta.get("parameters") or {}
+    fit = meta.get("fit") if isinstance(meta, dict) else None
+    cov = (fit or {}).get("correlation") if isinstance(fit, dict) else None
+    cov = dict(cov) if isinstance(cov, dict) else {}
+    if cov.get("std") is None and isinstance(cov.get("coordinates"), list):
+        params = meta.get("parameters") if isinstance(meta.get("parameters"), dict) else {}
         std = []
         for name in cov["coordinates"]:
             key, relative = _FROM_PARAMETERS.get(name, (name, False))
-            entry = params.get(key) or {}
+            entry = params.get(key) if isinstance(params.get(key), dict) else {}
             value, sd = entry.get("value"), entry.get("std")
-            std.append(None if sd is None or value in (None, 0) else (sd / value if relative else sd))
+            ok = all(isinstance(x, (int, float)) and np.isfinite(x) for x in (value, sd)) and value != 0
+            std.append((sd / value if relative else sd) if ok else None)
         cov["std"] = std
     return cov
 
