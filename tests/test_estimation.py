@@ -735,6 +735,17 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
         lines = [ln for ln in (out.stdout + out.stderr).splitlines() if ln.strip()]
         assert out.returncode == 2 and len(lines) == 1 and "parameters.json" in lines[0], out.stderr
         assert field in lines[0] and not (tmp_path / "never").exists()
+    # a hand-edited covariance costs the band, said in one line, not the prediction
+    bad = tmp_path / "bad_correlation"
+    shutil.copytree(cal, bad)
+    meta = json.loads((bad / "parameters.json").read_text())
+    meta["fit"]["correlation"] = "edited"
+    (bad / "parameters.json").write_text(json.dumps(meta))
+    out = subprocess.run(cli + ["predict", str(bad), "-o", str(tmp_path / "no_band")], capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
+    assert [ln for ln in out.stderr.splitlines() if "no band" in ln and "fit.correlation" in ln]
+    assert "band_mm" not in (tmp_path / "no_band" / "aim.csv").read_text().splitlines()[0]
     bad = tmp_path / "bad_reference"
     shutil.copytree(cal, bad)
     ref = bad / "observation" / "reference.npz"
