@@ -52,7 +52,7 @@ from hifumotion.errors import InputError
 from hifumotion.estimation import fit as fitting
 from hifumotion.estimation.evaluator import Evaluator
 from hifumotion.estimation.iterative import iterative_estimate
-from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, model_spec
+from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, forward_model, model_spec
 from hifumotion.estimation.settings import CalibrationSettings
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm
 from hifumotion.estimation.prepare import Observation
@@ -197,7 +197,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     degeneracy: list = []
     with ev.cluster():
         t1 = time.perf_counter()
-        reduced = search_settings.integrator == "reduced"
+        reduced = forward_model(search_settings).is_reduced
         centres = []
         checks: list[dict] = []
         if reduced:     # the modes around the design's centre: every start is within a factor 4 of it
@@ -511,7 +511,8 @@ def objective_for(asked: str, observation: Observation) -> str:
 def _expected_runs(s: CalibrationSettings) -> int:
     """A rough count of search runs, for the progress bar."""
     p = 4
-    passes = 2 if s.search_integrator == "reduced" and s.search_particles < s.model.tissue_particles else 1
+    reduced = forward_model(s.search_integrator).is_reduced
+    passes = 2 if reduced and s.search_particles < s.model.tissue_particles else 1
     if s.method == "least_squares":
         return 6 + passes * s.max_evaluations * (p + 1) + 2 * p + 3
     if s.method == "cmaes":

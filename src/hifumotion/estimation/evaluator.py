@@ -29,7 +29,7 @@ import numpy as np
 
 from hifumotion.console import log
 from hifumotion.errors import CalibrationFailed, InputError, brief
-from hifumotion.estimation.model import ModelSpec, Parameters, run_model
+from hifumotion.estimation.model import ModelSpec, Parameters, forward_model, run_model
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
 from hifumotion.estimation.space import SearchSpace
 
@@ -78,7 +78,7 @@ def full_run_task(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int,
     first ``upto`` training frames, and the run as a reduced model's snapshot (``"snapshot"``)."""
     _use_threads(threads)
     snapshots: list = []
-    run = run_model(spec, k, int(data.frames[upto - 1]), snapshots=snapshots)
+    run = run_model(spec, k, int(data.frames[upto - 1]), full=True, snapshots=snapshots)
     r = residuals_mm(run.points_mm, data, upto, run.bar_centre_mm)
     return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps, "snapshot": snapshots[0]}
 
@@ -297,10 +297,10 @@ class Evaluator:
         Its modes are those of every full run kept so far (:attr:`snapshots`) and, with
         ``new_runs``, of the spec's snapshot scenes at ``θ`` run now; without, ``θ``'s own run must
         be among the kept ones already (:meth:`full_runs`). Nothing to do (0 s) unless the spec's
-        integrator is ``"reduced"``."""
+        integrator is a reduced one."""
         import time
 
-        if self.spec.settings.integrator != "reduced":
+        if not forward_model(self.spec).is_reduced:
             return 0.0
         started = time.perf_counter()
         n = len(self.data.frames) if upto is None else int(upto)

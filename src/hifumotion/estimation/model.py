@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field, replace
-from typing import Protocol
+from typing import Callable
 
 import numpy as np
 
@@ -236,12 +236,32 @@ def scene_for(spec: ModelSpec, k: Parameters, last_frame: int) -> Scene:
     return scene
 
 
-class ForwardModel(Protocol):
-    """One integrator of the model: ``(spec, scene, k, last_frame) → SimulationResult`` — the
-    scene (:func:`scene_for`) run from its settled state to ``last_frame``, its tissue particles
-    at every frame. :data:`FORWARD_MODELS` names them; ``ModelSettings.integrator`` picks one."""
+@dataclass(frozen=True)
+class ForwardModel:
+    """One integrator of the model: called ``(spec, scene, k, last_frame) → SimulationResult``,
+    the scene (:func:`scene_for`) run from its settled state to ``last_frame``, its tissue
+    particles at every frame. :data:`FORWARD_MODELS` names them; ``ModelSettings.integrator``
+    picks one (:func:`forward_model`). Callers ask it what it is, never test its name.
 
-    def __call__(self, spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int): ...
+    ``reduces``: the full integrator whose runs make this one's modes (``None``: a full model) —
+    a reduced model needs full runs before it runs, and is checked against that full model."""
+
+    name: str
+    run: Callable
+    reduces: str | None = None
+
+    def __call__(self, spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
+        return self.run(spec, scene, k, last_frame)
+
+    @property
+    def is_reduced(self) -> bool:
+        """Whether its modes come from another integrator's full runs."""
+        return self.reduces is not None
+
+    @property
+    def full(self) -> "ForwardModel":
+        """The full model it reduces (itself when it is one)."""
+        return FORWARD_MODELS[self.reduces] if self.reduces is not None else self
 
 
 def _implicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int, keep: list | None = None):
@@ -270,18 +290,32 @@ def _reduced(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
 
 
 #: The integrators behind :func:`run_model`, by ``ModelSettings.integrator``.
-FORWARD_MODELS: dict[str, ForwardModel] = {"implicit": _implicit, "explicit": _explicit, "reduced": _reduced}
+FORWARD_MODELS: dict[str, ForwardModel] = {m.name: m for m in (
+    ForwardModel("implicit", _implicit), ForwardModel("explicit", _explicit),
+    ForwardModel("reduced", _reduced, reduces="implicit"))}
 assert tuple(FORWARD_MODELS) == INTEGRATORS, "every integrator the settings accept has a forward model"
 
 
-def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), snapshots: list | None = None
-              ) -> ModelRun:
+def forward_model(spec_or_integrator) -> ForwardModel:
+    """The forward model of a :class:`ModelSpec` (its ``settings.integrator``), of
+    :class:`ModelSettings`, or of an integrator's name."""
+    name = spec_or_integrator
+    if isinstance(name, ModelSpec):
+        name = name.settings.integrator
+    elif isinstance(name, ModelSettings):
+        name = name.integrator
+    return FORWARD_MODELS[name]
+
+
+def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), full: bool = False,
+              snapshots: list | None = None) -> ModelRun:
     """Simulate frames 0 … ``last_frame`` with ``k``; the points A at every frame.
 
     ``keep_frames``: frames whose tissue particles are returned as well (for masks).
-    ``snapshots``: a list to which the run appends its nodes' motion (a reduced model's
-    snapshot, :func:`~hifumotion.creep.scene.reduced_from_runs`); the run is then of the full
-    fast path whatever the spec's integrator — the full model that its reduced model reduces.
+    ``full``: run the full model the spec's integrator reduces (:attr:`ForwardModel.full`; the
+    spec's own when it is a full one). ``snapshots``: a list to which that full run appends its
+    nodes' motion (a reduced model's snapshot, :func:`~hifumotion.creep.scene.reduced_from_runs`;
+    only the fast path keeps them, so it implies ``full`` and the implicit integrator).
     Raises :class:`~hifumotion.errors.InputError` for parameters outside the model's
     validity (ν ≥ 0.5, E ≤ 0 …).
     """
@@ -294,7 +328,8 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), s
     if snapshots is not None:
         sim = _implicit(spec, scene, k, last_frame, keep=snapshots)
     else:
-        sim = FORWARD_MODELS[spec.settings.integrator](spec, scene, k, last_frame)
+        model = forward_model(spec)
+        sim = (model.full if full else model)(spec, scene, k, last_frame)
     rest = sim.tissue_mm[0]
     frames = np.arange(len(sim.times_s))
     # the points A are material points: followed with the particles near them at frame 0
@@ -304,5 +339,6 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), s
     return ModelRun(k, frames, points, rest, kept, sim.bar_centre_mm, sim.steps, time.perf_counter() - t0)
 
 
-__all__ = ["Parameters", "ModelSettings", "ModelSpec", "ModelRun", "ForwardModel", "FORWARD_MODELS", "model_spec",
+__all__ = ["Parameters", "ModelSettings", "ModelSpec", "ModelRun", "ForwardModel", "FORWARD_MODELS", "forward_model",
+           "model_spec",
            "scene_for", "run_model"]

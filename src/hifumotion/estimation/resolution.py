@@ -69,8 +69,7 @@ def resolution_check(spec: ModelSpec, k: Parameters, observation, last_frame: in
     if not factor > 1.0:
         raise ValueError(f"the finer lattice needs more particles: factor {factor}")
     finer = model_spec(observation, replace(spec.settings, tissue_particles=int(round(factor * spec.settings.tissue_particles))))
-    full = spec.settings.integrator == "reduced"
-    runs = [run_model(m, k, last_frame, snapshots=[] if full else None).points_mm for m in (spec, finer)]
+    runs = [run_model(m, k, last_frame, full=True).points_mm for m in (spec, finer)]
     return ResolutionCheck((len(spec.tissue_mm), len(finer.tissue_mm)), (spec.spacing_mm, finer.spacing_mm),
                            displacement_difference_mm(*runs), float(observation.pixel_mm), int(last_frame))
 
