@@ -4,6 +4,7 @@ demo`` runs on by default."""
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -54,6 +55,28 @@ def test_a_folder_that_is_not_a_twin_is_one_line(tmp_path):
     (tmp_path / "observed").mkdir()
     with pytest.raises(InputError, match="observed/ and truth/"):
         read_twin(tmp_path)
+
+
+def _edited_twin(tmp_path, edit):
+    folder = tmp_path / "twin"
+    shutil.copytree(bundled_twin(), folder)
+    edit(folder / "truth")
+    return folder
+
+
+@pytest.mark.parametrize("edit, fragment", [
+    (lambda t: (t / "frames" / "frame_0007.png").unlink(), "199 frame_"),
+    (lambda t: shutil.copy(t.parent / "observed" / "frames" / "frame_0007.png", t / "frames" / "frame_0007.png"),
+     "frame_0007.png"),
+    (lambda t: (t / "parameters.json").write_text('{"config": "preset"}'), "parameters.json"),
+    (lambda t: (t / "parameters.json").write_text('{"config": {"imaging": {"frames": "many"}}}'), "imaging.frames"),
+    (lambda t: (t / "motion.json").write_text("[1, 2]"), "motion.json"),
+    (lambda t: (t / "motion.json").write_text("{"), "motion.json"),
+])
+def test_a_damaged_twin_is_one_error_naming_the_file(tmp_path, edit, fragment):
+    with pytest.raises(InputError) as err:
+        read_twin(_edited_twin(tmp_path, edit))
+    assert fragment in str(err.value) and "\n" not in str(err.value)
 
 
 @pytest.mark.slow

@@ -11,7 +11,6 @@ and the version that made it; ``scripts/bundle_demo_twin.py`` makes it again).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,6 +74,7 @@ def _stack(folder: Path, prefix: str, count: int, shape: tuple[int, int]) -> np.
 
 def read_twin(folder: str | Path) -> StoredTwin:
     """The twin in ``folder`` (``observed/`` and ``truth/``, as ``hifumotion experiment`` writes them)."""
+    from hifumotion.config import validate_config
     from hifumotion.io.structured import read_structured
     from hifumotion.observed import load_observed
 
@@ -86,12 +86,14 @@ def read_twin(folder: str | Path) -> StoredTwin:
     parameters = read_structured(truth / "parameters.json", "json", "parameters.json")
     if not isinstance(parameters, dict) or not isinstance(parameters.get("config"), dict):
         raise InputError("expected the twin's settings under \"config\"", truth / "parameters.json")
-    config = TwinConfig.model_validate(parameters["config"])
+    config = validate_config(TwinConfig, parameters["config"], truth / "parameters.json")
     shape = observed.frames.shape[1:]
     frames = _stack(truth / "frames", "frame_", len(observed.frames), shape)
     sweep = _stack(truth / "sweep", "slice_", len(observed.sweep), shape)
     motion_path = truth / "motion.json"
-    motion = json.loads(motion_path.read_text(encoding="utf-8")) if motion_path.is_file() else {}
+    motion = read_structured(motion_path, "json", "motion.json") if motion_path.is_file() else {}
+    if not isinstance(motion, dict):
+        raise InputError("expected a JSON object", motion_path)
     return StoredTwin(folder, config, observed, frames, sweep, parameters, motion)
 
 
