@@ -186,6 +186,10 @@ masks = "{folder / 'truth' / 'frames'}"
     assert set(choice["centroid_mm"]) == ranked and choice["winner"] in ranked
     assert choice["winner"] == min(choice["centroid_mm"], key=choice["centroid_mm"].get)
     assert min(choice["held_frames"]) > choice["fit_frames"][-1]          # held out at the end, in time
+    # and written beside the parameters and the prediction it qualifies
+    for path, key in (("prediction/prediction.json", "choice"), ("calibration/parameters.json", "predictor_choice")):
+        told = json.loads((out / path).read_text())[key]
+        assert told["winner"] == choice["winner"] and told["sentence"] == choice["sentence"]
     # where another predictor wins, its sections are there to aim at; where the physics does, nothing more
     chosen = out / "prediction" / "chosen" / "sections.csv"
     if choice["winner"] == "physics":

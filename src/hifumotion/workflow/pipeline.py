@@ -196,8 +196,8 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
             pred.band = aim_band(cal.spec, cal.parameters, reference, sorted(set(training) | set(validation)),
                                  cal.summary["fit"]["correlation"], pred.aim_mm)
         folder = out / "prediction"
-        write_prediction_folder(folder, pred, sorted(set(training) | set(validation)), observed.frame_interval_s,
-                                validation, predict_s)
+        prediction_summary = write_prediction_folder(folder, pred, sorted(set(training) | set(validation)),
+                                                     observed.frame_interval_s, validation, predict_s)
         tell("predict", 1.0)
 
     program = observed.setup.program_at_frames(n)
@@ -211,6 +211,10 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
             choice = rank_on_holdout({f: observation.frame_masks[f] for f in range(n)}, training, program,
                                      observed.frame_interval_s, float(observed.pixel_mm), held)
             write_json(folder / "choice.json", choice.as_dict())
+            # the ranking beside the parameters it qualifies and the prediction it may overrule
+            prediction_summary["choice"] = cal.summary["predictor_choice"] = choice.as_dict()
+            write_json(folder / "prediction.json", prediction_summary)
+            write_json(out / "calibration" / "parameters.json", cal.summary)
 
     live = None
     if s.online_loop and s.horizons_frames and observation.motion is not None:
