@@ -318,10 +318,14 @@ def _aim_parts(outcome, inputs: ReportInputs, folder: Path) -> list[str]:
     band = pred.band
     png = figures.aim_trajectory(t, shift, folder / "aim.png", true_shift, true_t, outcome.validation[0] * dt,
                                  None if band is None else band.aim_mm - pred.aim_plan_mm)
-    wide = band is not None
-    rows = [[f, f * dt, shift[f, 0], shift[f, 1], float(np.hypot(*shift[f]))]
-            + ([float(band.width_mm[f])] if wide and f < len(band.width_mm) else [""] if wide else [])
-            for f in outcome.validation if f < len(shift)]
+    rows = []
+    for f in outcome.validation:
+        if f >= len(shift):
+            continue
+        row = [f, f * dt, shift[f, 0], shift[f, 1], float(np.hypot(*shift[f]))]
+        if band is not None:
+            row.append(float(band.width_mm[f]) if f < len(band.width_mm) else "")
+        rows.append(row)
     parts = [paragraph("The planned focus is the target's centroid on frame 0; the model carries that material "
                        "point. Its predicted shift tells the operator where to move the focus (image axes: x along "
                        "the transducer, y in depth; mm). Every frame: prediction/aim.csv.")]
@@ -334,7 +338,7 @@ def _aim_parts(outcome, inputs: ReportInputs, folder: Path) -> list[str]:
             "undetermined direction moves the prediction (aim.csv band_mm)."))
     parts += [figure(png.name, "Where to aim: the predicted shift of the planned focus"),
               table(["frame", "time (s)", "shift x (mm)", "shift y (mm)", "|shift| (mm)"]
-                    + (["band (mm)"] if wide else []), rows, "Validation frames")]
+                    + (["band (mm)"] if band is not None else []), rows, "Validation frames")]
     return parts
 
 

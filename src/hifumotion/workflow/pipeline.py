@@ -191,10 +191,10 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
         pred = predict_calibrated(cal.spec, cal.parameters, reference, sorted(set(training) | set(validation)), keep)
         predict_s = time.perf_counter() - t0
         if s.prediction_band:
-            from hifumotion.prediction.band import aim_band
+            from hifumotion.prediction.band import aim_band, covariance_from_calibration
 
             pred.band = aim_band(cal.spec, cal.parameters, reference, sorted(set(training) | set(validation)),
-                                 cal.summary["fit"]["correlation"], pred.aim_mm)
+                                 covariance_from_calibration(cal.summary), pred.aim_mm)
         folder = out / "prediction"
         prediction_summary = write_prediction_folder(folder, pred, sorted(set(training) | set(validation)),
                                                      observed.frame_interval_s, validation, predict_s)
