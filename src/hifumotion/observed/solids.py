@@ -169,4 +169,62 @@ def bloom_mask(solid: np.ndarray, bloom_px: tuple[int, int]) -> np.ndarray:
     return cv2.dilate(np.asarray(solid, np.uint8), kernel).astype(bool)
 
 
-__all__ = ["Solids", "check_bar_in_image", "imaging_plane", "known_solids", "measure_bloom_px", "bloom_mask"]
+def continue_into_bloom(mask: np.ndarray, solid: np.ndarray, bloom_px: tuple[int, int]) -> np.ndarray:
+    """``mask`` continued through a solid's bloom along the lines that leave the solid's surface.
+
+    A segmentation that cannot see inside the bloom (:func:`bloom_mask`, set to the water's
+    level before it ran) stops at the bloom's edge, whereas tissue pressed by the bar reaches
+    the bar: the strip the bloom hides is left out of the target and, carried through a cine,
+    biases every frame's section towards the side away from the bar. Each hidden pixel is
+    taken as target when the first pixel beyond the bloom on the line from its nearest solid
+    pixel through it is target: what the bloom hides between the solid and tissue seen at its
+    edge is that tissue; where the bloom's edge shows water, the strip stays water. Distances
+    are measured in units of the bloom's own semi-axes (rows, cols), so "beyond the bloom"
+    means the same on its short and long sides.
+
+    Returns a new mask; ``mask`` is not changed. A solid that is empty, or a zero bloom, leaves
+    ``mask`` as it is.
+    """
+    from scipy import ndimage
+
+    mask = np.asarray(mask, bool)
+    solid = np.asarray(solid, bool)
+    if not solid.any() or max(bloom_px) <= 0:
+        return mask.copy()
+    ry, rx = (max(int(v), 1) for v in bloom_px)
+    # distance from the solid in bloom units (the bloom is where it is <= 1), and the nearest solid pixel
+    dist, (near_r, near_c) = ndimage.distance_transform_edt(~solid, sampling=(1.0 / ry, 1.0 / rx),
+                                                            return_indices=True)
+    band = bloom_mask(solid, bloom_px)
+    hidden = band & ~solid & ~mask
+    r, c = np.nonzero(hidden)
+    if r.size == 0:
+        return mask.copy()
+    sr, sc = near_r[r, c], near_c[r, c]
+    length_px = np.hypot(r - sr, c - sc)
+    # along the line from (sr, sc) through (r, c) the bloom's edge lies at 1 / dist of the way
+    # out; the first pixel beyond it is the first one there or further that the band does not hold
+    # (the band is the solid dilated by a pixel ellipse, which the distance's level 1 follows to
+    # within a pixel)
+    edge = 1.0 / dist[r, c]
+    seen = np.zeros(r.size, bool)
+    pending = np.ones(r.size, bool)
+    for step_px in range(1, max(ry, rx) + 2):
+        scale = edge + step_px / length_px
+        qr = np.rint(sr + (r - sr) * scale).astype(int)
+        qc = np.rint(sc + (c - sc) * scale).astype(int)
+        inside = (qr >= 0) & (qr < mask.shape[0]) & (qc >= 0) & (qc < mask.shape[1])
+        pending &= inside
+        beyond = pending.copy()
+        beyond[pending] = ~band[qr[pending], qc[pending]]
+        seen[beyond] = mask[qr[beyond], qc[beyond]]
+        pending &= ~beyond
+        if not pending.any():
+            break
+    out = mask.copy()
+    out[r[seen], c[seen]] = True
+    return out
+
+
+__all__ = ["Solids", "check_bar_in_image", "imaging_plane", "known_solids", "measure_bloom_px", "bloom_mask",
+           "continue_into_bloom"]

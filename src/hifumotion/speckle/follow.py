@@ -94,7 +94,9 @@ class TargetSegmentation:
     ``(rows, cols)``; ``speckle_fwhm_px``: the speckle's size ``(rows, cols)``;
     ``outside_fraction``: the share of the level set's segmentation that lay beyond the given
     region's margin (:data:`REGION_MARGIN`); ``given_region_kept``: True when that share passed
-    :data:`REGION_LEAK_FRACTION` and the given region was followed instead.
+    :data:`REGION_LEAK_FRACTION` and the given region was followed instead;
+    ``bloom_continued_px``: the pixels of the bloom's strip given back to the target
+    (:func:`~hifumotion.observed.solids.continue_into_bloom`).
     """
 
     mask: np.ndarray
@@ -103,6 +105,7 @@ class TargetSegmentation:
     speckle_fwhm_px: tuple[float, float]
     outside_fraction: float = 0.0
     given_region_kept: bool = False
+    bloom_continued_px: int = 0
 
 
 #: How far outside the given initial region frame 0's segmentation may reach, as a fraction of
@@ -141,14 +144,18 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
     3. The segmentation, less the solids, is moved inwards by ``boundary_offset_mm`` (the
        imaging system's, measured on a phantom) on its free boundary only: where it lies on a
        solid it is already where the solid's surface is.
-    4. A segmentation that leaves the given region (more than :data:`REGION_LEAK_FRACTION` of
+    4. The strip the bloom hid is given back where tissue is seen at the bloom's edge
+       (:func:`~hifumotion.observed.solids.continue_into_bloom`): tissue pressed by the bar
+       reaches the bar, and a section cut off at the bloom's edge would be biased away from
+       it in every frame it is carried to.
+    5. A segmentation that leaves the given region (more than :data:`REGION_LEAK_FRACTION` of
        it beyond :data:`REGION_MARGIN` of the region's radius) is not the target drawn: the given
        region is kept instead, and ``given_region_kept`` says so.
     """
     from scipy import ndimage
 
     from hifumotion.observed import shift_boundary
-    from hifumotion.observed.solids import bloom_mask, measure_bloom_px
+    from hifumotion.observed.solids import bloom_mask, continue_into_bloom, measure_bloom_px
     from hifumotion.segmentation import _resolve_init, segment
     from hifumotion.segmentation.levelset import initial_phi
     from hifumotion.sequence import as_spacing_mm
@@ -175,6 +182,13 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
     if boundary_offset_mm:
         pixel = float(np.mean(as_spacing_mm(spacing_mm)))
         mask = shift_boundary(mask | excluded, boundary_offset_mm, pixel) & ~excluded
+    continued = 0
+    if mask.any() and max(bloom) > 0:
+        # the strip the bloom hid, where tissue is seen at the bloom's edge (it lies on the
+        # bar, so the free boundary's offset does not apply to it)
+        grown = continue_into_bloom(mask, solids.bar, bloom) & ~solid
+        continued = int(grown.sum() - mask.sum())
+        mask = grown
     if not mask.any():
         raise InputError("the target's segmentation is empty once the known solids are removed; "
                          "check the initial contour", "init")
@@ -184,7 +198,7 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
         # it found is not the target the user drew, and carried through the cine it would be
         # followed as if it were
         return TargetSegmentation(inside, excluded, bloom, fwhm, leak, True)
-    return TargetSegmentation(mask, excluded, bloom, fwhm, leak, False)
+    return TargetSegmentation(mask, excluded, bloom, fwhm, leak, False, continued)
 
 
 def refine_in_band(image: np.ndarray, carried: np.ndarray, excluded: np.ndarray, background: float,

@@ -287,7 +287,8 @@ def write_tracking(folder: str | Path, frames: np.ndarray, result: FollowResult,
         "bar_bloom_px": None if first is None else list(first.bloom_px),
         "frame0_segmentation": None if first is None else {
             "outside_given_region_fraction": round(float(first.outside_fraction), 4),
-            "given_region_kept": bool(first.given_region_kept)},
+            "given_region_kept": bool(first.given_region_kept),
+            "bar_bloom_continued_px": int(first.bloom_continued_px)},
         "ms_per_frame_mean": round(1000 * float(np.mean(result.seconds_per_frame[1:])), 3)
         if series.n_frames > 1 else None,
         "centroid_shift_mm": np.round(np.linalg.norm(centroid - centroid[0], axis=1), 4).tolist(),
