@@ -151,7 +151,7 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
         "calibration_s": cal_s, "calibration_timings_s": cal.timings_s, "runs": cal.runs, "objective": cal.objective,
         "calibration_settings": {"search_integrator": cal.search_spec.settings.integrator},
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
-        "degeneracy": cal.degeneracy, "space_mapping": cal.mapped, "resolution_check": cal.resolution,
+        "degeneracy": cal.degeneracy, "strategy": cal.record.as_dict(), "resolution_check": cal.resolution,
         "physics": ev.physics, "baselines_validation": ev.baselines, "online": ev.online,
         "verdict": ev.physics["verdict"], "choice": ev.physics.get("choice"), "choice_s": choice_s,
         "predict_s": predict_s, "validation_window_s": window_s,
@@ -361,8 +361,8 @@ def search_comparison(reduced: dict, implicit: dict) -> dict:
         "dsc_mean_difference": d_dsc, "centroid_difference_mm": d_centroid,
         "fitted": {"reduced": reduced["fitted"], "implicit": implicit["fitted"]},
         # the training objective of each fit on the full final model (what both searches minimise)
-        "final_model_cost_mm": {"reduced": reduced["space_mapping"].get("full_model_check", {}).get("cost_full_model_mm"),
-                                "implicit": implicit["space_mapping"].get("cost_final_model_mm")},
+        "final_model_cost_mm": {"reduced": reduced["strategy"].get("full_model_check", {}).get("cost_full_model_mm"),
+                                "implicit": implicit["strategy"].get("cost_final_model_mm")},
         "targets": {f"calibration<={REDUCED_CALIBRATION_S:.0f}s": reduced["calibration_s"] <= REDUCED_CALIBRATION_S,
                     # "as good as": no worse than the implicit search's fit by more than the margins
                     f"dsc_within_{FIT_DSC}": d_dsc >= -FIT_DSC,

@@ -393,8 +393,8 @@ def test_the_reduced_search_keeps_the_friction_where_its_model_holds_and_remakes
     at that region's edge, the fit reaches the truth; searched free and unchecked, it is misled;
     searched free but checked by the full model, the check sees the false fit and the model made
     again there leads on to the truth."""
-    from hifumotion.estimation.calibrate import _reduced_search
     from hifumotion.estimation.settings import CalibrationSettings
+    from hifumotion.estimation.strategies import ReducedTrustRegion, TrustRegionRecord
 
     truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
     start = np.array([np.log(9000.0), 0.43, np.log(2e5), 0.5, np.log(0.3)])
@@ -403,8 +403,9 @@ def test_the_reduced_search_keeps_the_friction_where_its_model_holds_and_remakes
         ev = ReducedFrictionEvaluator(truth, centre_mu=0.3)
         s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=trust, reduced_rounds=8,
                                 full_model_check=checked)
-        centres, made, checks = [start], [], []
-        _, _, theta = _reduced_search(ev, s, start, centres, made, checks)
+        record, made = TrustRegionRecord(centres=[start]), []
+        _, _, theta, rounds = ReducedTrustRegion._pass(ev, s, start, record, made)
+        centres, checks = record.centres, [r.check for r in rounds if r.check is not None]
         mu = float(np.exp(theta[4]))
         assert ev.space.friction is not None       # the whole space is back after the search
         assert len(checks) == (ev.made + 1 if checked else 0) == getattr(ev, "full", 0)
@@ -419,11 +420,11 @@ def test_the_reduced_search_keeps_the_friction_where_its_model_holds_and_remakes
             assert np.all(steps <= np.log(1.25) + 1e-6)
         if checked:
             # the last check is the fit's: the full model and the reduced one agree there
-            assert checks[-1]["agrees"] and np.array_equal(checks[-1]["theta"], theta)
-            assert checks[-1]["cost_full_model_mm"] == pytest.approx(checks[-1]["cost_reduced_model_mm"], rel=1e-9)
+            assert checks[-1].agrees and np.array_equal(checks[-1].theta, theta)
+            assert checks[-1].cost_full_mm == pytest.approx(checks[-1].cost_reduced_mm, rel=1e-9)
         if checked and trust > 2:
             # free, the first fit was misled, as unchecked; the check found it out
-            assert not checks[0]["agrees"] and abs(np.exp(checks[0]["theta"][4]) / 0.12 - 1) > 0.3
+            assert not checks[0].agrees and abs(np.exp(checks[0].theta[4]) / 0.12 - 1) > 0.3
 
 
 def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
@@ -431,8 +432,8 @@ def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
     free, one round): the search walks to the false friction; the full model fits that fit worse
     than the start, so the start is what the search returns — and the design's starts are the best
     of each friction level."""
-    from hifumotion.estimation.calibrate import _checks, _design_starts, _reduced_search
     from hifumotion.estimation.settings import CalibrationSettings
+    from hifumotion.estimation.strategies import ReducedTrustRegion, TrustRegionRecord, _design_starts, run_checks
 
     truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
     ev = ReducedFrictionEvaluator(truth, centre_mu=0.3)
@@ -441,11 +442,11 @@ def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
     s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=0,
                             reduced_correction=False)
     at_truth = ev.space.theta(truth)
-    start, = _checks(ev, [at_truth], s)
-    assert start["cost_full_model_mm"] == pytest.approx(0.0, abs=1e-9) and not start["agrees"]
-    checks = []
-    fit, _, theta = _reduced_search(ev, s, at_truth, [at_truth], [], checks, start)
-    assert len(checks) == 1 and checks[0]["cost_full_model_mm"] > 1.0       # the fit the search found
+    start, = run_checks(ev, [at_truth], s.reduced_agreement)
+    assert start.cost_full_mm == pytest.approx(0.0, abs=1e-9) and not start.agrees
+    fit, _, theta, rounds = ReducedTrustRegion._pass(ev, s, at_truth, TrustRegionRecord(centres=[at_truth]), [], start)
+    checks = [r.check for r in rounds if r.check is not None]
+    assert len(checks) == 1 and checks[0].cost_full_mm > 1.0       # the fit the search found
     assert np.array_equal(theta, at_truth) and fit.method == "design"
     design = [(5.0, [1.0, 0.45, 2.0, 0.5, -2.5]), (3.0, [2.0, 0.45, 2.0, 0.5, -1.4]),
               (4.0, [3.0, 0.45, 2.0, 0.5, -2.5]), (1.0, [4.0, 0.45, 2.0, 0.5, -1.4])]
@@ -486,8 +487,8 @@ def test_the_full_models_miss_at_the_centre_corrects_the_reduced_search():
     its fit is the bias's optimum, which the full model fits worse, and it does not agree there;
     searched with the full model's miss at the start added (zero-order consistency, Alexandrov et
     al. 1998), the first search reaches the truth, where the corrected model and the full one agree."""
-    from hifumotion.estimation.calibrate import _checks, _reduced_search
     from hifumotion.estimation.settings import CalibrationSettings
+    from hifumotion.estimation.strategies import ReducedTrustRegion, TrustRegionRecord, run_checks
 
     truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
     theta0 = np.array([np.log(14000.0), 0.45, np.log(1e5), 0.5, np.log(0.15)])
@@ -496,16 +497,15 @@ def test_the_full_models_miss_at_the_centre_corrects_the_reduced_search():
         ev = BiasedReducedEvaluator(truth)
         s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=0,
                                 reduced_correction=corrected)
-        start, = _checks(ev, [theta0], s)
-        checks = []
-        _, _, theta = _reduced_search(ev, s, theta0, [theta0], [], checks, start)
-        found[corrected] = (theta, checks[0])
+        start, = run_checks(ev, [theta0], s.reduced_agreement)
+        _, _, theta, rounds = ReducedTrustRegion._pass(ev, s, theta0, TrustRegionRecord(centres=[theta0]), [], start)
+        found[corrected] = (theta, rounds[0].check)
     (plain, plain_check), (fit, check) = found[False], found[True]
     k = FrictionEvaluator(truth).space.parameters(fit)
     assert k.youngs_modulus_pa == pytest.approx(9000.0, rel=0.01) and k.friction == pytest.approx(0.12, rel=0.01)
-    assert check["agrees"] and check["cost_full_model_mm"] == pytest.approx(check["cost_reduced_model_mm"], rel=0.05)
+    assert check.agrees and check.cost_full_mm == pytest.approx(check.cost_reduced_mm, rel=0.05)
     # uncorrected, the bias's optimum: off the truth, and the full model fits it worse
-    assert not plain_check["agrees"] and plain_check["cost_full_model_mm"] > 10 * check["cost_full_model_mm"]
+    assert not plain_check.agrees and plain_check.cost_full_mm > 10 * check.cost_full_mm
     assert abs(np.exp(plain[0]) / 9000.0 - 1) > 0.01 or abs(np.exp(plain[4]) / 0.12 - 1) > 0.01
 
 
@@ -514,19 +514,18 @@ def test_a_search_that_stays_at_its_checked_start_ends_the_rounds_without_anothe
     full one at its centre, so the search does not leave it: the rounds end there, with no second
     full run at the same point and no model made again from the same runs (which would search the
     same model again, round after round)."""
-    from hifumotion.estimation.calibrate import _checks, _reduced_search
     from hifumotion.estimation.settings import CalibrationSettings
+    from hifumotion.estimation.strategies import ReducedTrustRegion, TrustRegionRecord, run_checks
 
     truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5, friction=0.12)
     ev = BiasedReducedEvaluator(truth)
     at_truth = ev.space.theta(truth)
     s = CalibrationSettings(max_evaluations=20, reduced_friction_trust=100.0, reduced_rounds=3)
-    start, = _checks(ev, [at_truth], s)
-    assert start["cost_full_model_mm"] == pytest.approx(0.0, abs=1e-9)
-    checks = []
-    fit, _, theta = _reduced_search(ev, s, at_truth, [at_truth], [], checks, start)
+    start, = run_checks(ev, [at_truth], s.reduced_agreement)
+    assert start.cost_full_mm == pytest.approx(0.0, abs=1e-9)
+    fit, _, theta, rounds = ReducedTrustRegion._pass(ev, s, at_truth, TrustRegionRecord(centres=[at_truth]), [], start)
     assert np.array_equal(theta, at_truth) and fit.method == "design"
-    assert checks == [] and ev.made == 0
+    assert [r.check for r in rounds] == [None] and ev.made == 0
 
 
 def test_the_resolution_check_compares_displacements_from_each_runs_own_frame_0():
@@ -556,8 +555,8 @@ def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_fri
     comes from full runs at the design's centre at each of the design's friction levels (the
     program's own travel: no snapshot scenes), made around the first; a force-held push keeps the
     spec's snapshot scenes (F/E × 0.5 and × 2) around the centre."""
-    from hifumotion.estimation.calibrate import _centre_model
     from hifumotion.estimation.settings import CalibrationSettings
+    from hifumotion.estimation.strategies import ReducedTrustRegion
 
     class Recorder(FrictionEvaluator):
         def __init__(self, truth):
@@ -576,7 +575,7 @@ def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_fri
     ev = Recorder(truth)
     design = ev.space.initial_design()
     centre = np.mean(design, axis=0)
-    _centre_model(ev, CalibrationSettings(), centre, driven=True)
+    ReducedTrustRegion._first_model(ev, CalibrationSettings(), centre, driven=True)
     (kind, at), (again, around, new_runs) = ev.calls
     levels = sorted({float(d[4]) for d in design})
     assert kind == "full" and again == "reduce" and not new_runs and len(levels) == 2
@@ -584,7 +583,7 @@ def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_fri
     assert np.array_equal(around, at[0])
     for driven, checked in ((False, True), (True, False)):
         ev.calls = []
-        _centre_model(ev, CalibrationSettings(full_model_check=checked), centre, driven=driven)
+        ReducedTrustRegion._first_model(ev, CalibrationSettings(full_model_check=checked), centre, driven=driven)
         assert len(ev.calls) == 1 and ev.calls[0][0] == "reduce" and ev.calls[0][2]
         assert np.array_equal(ev.calls[0][1], centre)
 
@@ -672,7 +671,7 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     assert params["fit"]["runs"] > 5 and (cal / "search_log.jsonl").is_file()
     assert (cal / "model" / "scene.toml").is_file() and (cal / "observation" / "tissue.vtp").is_file()
     # the model kept is the one that fits the training frames better, saved with its own parameters
-    mapping, model = params["fit"]["space_mapping"], params["model"]
+    mapping, model = params["fit"]["strategy"], params["model"]
     kept_search = mapping["cost_search_model_mm"] < mapping["cost_final_model_mm"]
     assert mapping["model_kept"] == ("search" if kept_search else "final")
     assert (model["tissue_particles"] == model["search_tissue_particles"]) == kept_search
@@ -950,7 +949,9 @@ def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path
     # the reduced search: the search model's around the design's centre (two snapshot runs) and
     # its best start (from those and the full run there), again where a check disagrees, then,
     # if the final model is finer, the final model's own around the first optimum (two runs)
-    centres, reductions = cal.mapped["reduced_model_centres"], cal.timings_s["reductions"]
+    record = cal.record.as_dict()
+    assert record["name"] == "reduced_trust_region"
+    centres, reductions = record["reduced_model_centres"], cal.timings_s["reductions"]
     assert len(centres) == len(reductions) >= (3 if final_particles == 300 else 2)
     assert cal.timings_s["reduced_model_s"] > 0
     assert reductions[0]["snapshots"] == 2 and reductions[1]["snapshots"] == 3
@@ -959,9 +960,9 @@ def test_a_saved_calibration_runs_the_model_that_was_fitted(small_twin, tmp_path
         assert len(second) == 2 and reductions.index(second[1]) > 1
     # the fit's check: the full model run at the fit, among every check the search made (a search
     # that did not leave its checked start, as a budget of one run makes it, adds none of its own)
-    check = cal.mapped["full_model_check"]
+    check = record["full_model_check"]
     assert check["cost_full_model_mm"] > 0 and check["cost_reduced_model_mm"] > 0
-    made = check["rounds"] + (cal.mapped["start_checks"] if final_particles == 150 else [])
+    made = check["rounds"] + (record["start_checks"] if final_particles == 150 else [])
     assert check["cost_full_model_mm"] == min(c["cost_full_model_mm"] for c in made)
     assert k.as_dict() == pytest.approx(cal.parameters.as_dict(), rel=1e-9)
     # the same mesh: the loaded model's voxels conform to the reconstructed surface as the fitted one's
@@ -1000,15 +1001,17 @@ def test_a_fit_stopped_at_its_budget_or_refuted_by_its_check_reports_nothing_as_
     from hifumotion.estimation.calibrate import Calibration
     from hifumotion.estimation.fit import FitResult
     from hifumotion.estimation.model import Parameters
+    from hifumotion.estimation.strategies import Check, SpaceMappingRecord, TrustRegionRecord
 
     names = ("log_E", "nu", "log_beta1", "beta2")
     search = FitResult(np.zeros(4), np.zeros((2, 3)), "least_squares", 8, 40, [], "`ftol` termination", True)
-    cal = Calibration(Parameters(), {n: 0.01 for n in names}, {n: True for n in names}, [20], search, None, {}, [],
-                      [], None, None, None, 40)
+    cal = Calibration(Parameters(), {n: 0.01 for n in names}, {n: True for n in names}, [20], search, None,
+                      SpaceMappingRecord(), [], [], None, None, None, 40)
     assert cal.caveats() == [] and cal.report()["poisson_ratio"]["determined"]
     search.converged, search.message = False, "The maximum number of function evaluations is exceeded."
     assert "budget" in cal.caveats()[0]
     assert not any(entry["determined"] for entry in cal.report().values())
     search.converged = True
-    cal.mapped = {"full_model_check": {"agrees": False, "cost_full_model_mm": 30.0, "cost_reduced_model_mm": 10.0}}
+    # a check whose full model's cost is 3× the reduced model's, which disagree
+    cal.record = TrustRegionRecord(fit_check=Check(np.zeros(4), np.full((2, 5), 1.0), np.full((2, 5), 3.0), False))
     assert "3.00×" in cal.caveats()[0] and not cal.report()["beta2"]["determined"]

@@ -198,7 +198,7 @@ masks = "{folder / 'truth' / 'frames'}"
         rows = np.genfromtxt(chosen, delimiter=",", names=True, dtype=None, encoding="utf-8")
         assert set(rows["method"]) == {choice["winner"]} and len(rows) >= 2
     assert "the training frames' choice:" in (proc.stdout + proc.stderr).replace("\n", " ")
-    kept = json.loads((out / "calibration" / "parameters.json").read_text())["fit"]["space_mapping"]["model_kept"]
+    kept = json.loads((out / "calibration" / "parameters.json").read_text())["fit"]["strategy"]["model_kept"]
     assert f"model kept (training cost, mm)</td><td>{kept} (search" in (out / "report" / "report.html").read_text()
     why = _check_in_browser(out / "report" / "report.html")
     if why:

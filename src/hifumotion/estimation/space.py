@@ -68,11 +68,24 @@ class SearchSpace:
         return np.array([np.log(self.youngs_pa[1]), self.poisson[1], np.log(self.beta1[1]), self.beta2[1]]
                         + ([np.log(self.friction[1])] if self.friction else []))
 
+    def index(self, name: str) -> int:
+        """The position of coordinate ``name`` in θ (:attr:`names`)."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"{name!r} is not a coordinate of this space ({', '.join(self.names)})") from None
+
+    def with_value(self, theta, name: str, value: float) -> np.ndarray:
+        """A copy of ``theta`` with coordinate ``name`` set to ``value``."""
+        out = np.array(theta, float)
+        out[self.index(name)] = value
+        return out
+
     def parameters(self, theta) -> Parameters:
-        t = np.clip(np.asarray(theta, float), self.lower, self.upper)
-        return Parameters(force_n=self.force_n, youngs_modulus_pa=float(np.exp(t[0])), poisson_ratio=float(t[1]),
-                          beta1=float(np.exp(t[2])), beta2=float(t[3]),
-                          friction=float(np.exp(t[4])) if self.friction else None)
+        t = dict(zip(self.names, np.clip(np.asarray(theta, float), self.lower, self.upper)))
+        return Parameters(force_n=self.force_n, youngs_modulus_pa=float(np.exp(t["log_E"])),
+                          poisson_ratio=float(t["nu"]), beta1=float(np.exp(t["log_beta1"])), beta2=float(t["beta2"]),
+                          friction=float(np.exp(t[FRICTION_NAME])) if self.friction else None)
 
     def theta(self, k: Parameters) -> np.ndarray:
         base = [np.log(k.youngs_modulus_pa), k.poisson_ratio, np.log(k.beta1), k.beta2]
@@ -88,7 +101,8 @@ class SearchSpace:
         a space without the friction is returned as it is."""
         if not self.friction:
             return self
-        mu = float(np.exp(np.clip(theta[4], self.lower[4], self.upper[4])))
+        i = self.index(FRICTION_NAME)
+        mu = float(np.exp(np.clip(theta[i], self.lower[i], self.upper[i])))
         return replace(self, friction=(max(self.friction[0], mu / factor), min(self.friction[1], mu * factor)))
 
     def initial_design(self) -> list[np.ndarray]:
@@ -103,7 +117,8 @@ class SearchSpace:
                     continue
                 # the friction decides whether a driven sample slides at all: two levels of it
                 for fm in (0.35, 0.65):
-                    out.append(np.array(start + [lo[4] + fm * (hi[4] - lo[4])]))
+                    i = self.index(FRICTION_NAME)
+                    out.append(np.array(start + [lo[i] + fm * (hi[i] - lo[i])]))
         return out
 
 

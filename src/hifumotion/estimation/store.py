@@ -117,7 +117,7 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
             "table1": None if cal.table1 is None else {
                 "accepted": cal.table1.accepted, "threshold_mm": cal.table1.threshold_mm,
                 "runs": cal.table1.runs, "events": cal.table1.events},
-            "space_mapping": cal.mapped,
+            "strategy": cal.record.as_dict(),
             "degeneracy": cal.degeneracy,
             "resolution_check": cal.resolution,
             # the fit's coordinates (estimation.space), their standard errors (null: no data bound

@@ -423,7 +423,7 @@ def write_report(folder: str | Path, outcome, truth_masks: dict | None, inputs: 
     facts = [["volume (mm³)", rec.volume_mm3], ["sweep planes", len(outcome.calibration.observation.observed.sweep)],
              ["model tissue particles", len(outcome.calibration.spec.tissue_mm)],
              ["model particle spacing (mm)", outcome.calibration.spec.spacing_mm]]
-    mapping = outcome.calibration.mapped
+    mapping = outcome.calibration.record.as_dict()
     if "model_kept" in mapping:
         # which of the two resolutions predicts: the one that fits the training frames better
         facts.append(["model kept (training cost, mm)",
