@@ -166,3 +166,13 @@ def test_driven_protocols_drive_the_bar_and_force_protocols_refuse_a_driven_one(
         twin_config("paper", {"bar": {"control": "travel", "travel_mm": 2.0}})
     with pytest.raises(InputError, match="protocol.hold_s"):
         twin_config("drive_release", {"protocol": {"hold_s": 20.0}})
+    # in to 4 mm over 4 s, back by 1.5 mm over 1.5 s, on to 7 mm by 90 % of the run, held
+    rev = twin_config("slide_reverse")
+    end = (rev.imaging.frames - 1) / rev.imaging.frame_rate_hz
+    travel = rev.bar.travel_schedule()
+    assert rev.bar.control == "travel" and rev.truth.solver == "finite_strain" and rev.physics.friction == 0.15
+    assert [travel(t) for t in (2.0, 4.0, 4.75, 5.5, 0.9 * end, end)] == pytest.approx([2.0, 4.0, 3.25, 2.5, 7.0, 7.0])
+    with pytest.raises(InputError, match="protocol.reverse_at_mm"):
+        twin_config("slide_reverse", {"protocol": {"reverse_at_mm": 1.0}})   # not beyond what is drawn back
+    with pytest.raises(InputError, match="protocol.ramp_s"):
+        twin_config("slide_reverse", {"protocol": {"ramp_s": 8.0}})          # the drawing back past 90 %

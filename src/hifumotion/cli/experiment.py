@@ -17,7 +17,7 @@ from hifumotion.errors import InputError
 def experiment(
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="New output folder (observed/ and truth/ go inside)."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="twin.toml (or .yaml) overriding any setting of the preset."),
-    preset: str = typer.Option("default", "--preset", help="default (the paper-sized twin), demo (coarse), small (a reduced twin for tests, particle truth), or a therapy protocol on the demo's resolution: paper, slow_push, push_release, oblique, push_change (the push changed unannounced after the training frames); or a driven bar on the finite-strain truth: slide (tilted, driven at a steady rate: the sample slides), drive_release (driven in, held, drawn back)."),
+    preset: str = typer.Option("default", "--preset", help="default (the paper-sized twin), demo (coarse), small (a reduced twin for tests, particle truth), or a therapy protocol on the demo's resolution: paper, slow_push, push_release, oblique, push_change (the push changed unannounced after the training frames); or a driven bar on the finite-strain truth: slide (tilted, driven at a steady rate: the sample slides), slide_reverse (tilted, driven in, drawn back, driven on: friction holds the sample until the bar returns), drive_release (driven in, held, drawn back)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of every random draw (overrides the config's)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
     print_config: bool = typer.Option(False, "--print-config", help="Print every setting (with its unit) as TOML and exit."),

@@ -110,10 +110,13 @@ class TruthConfig(ConfigModel):
 class ProtocolConfig(ConfigModel):
     """How the bar pushes; sets the bar's schedule and direction (the preset names a therapy's protocol)."""
 
-    name: Literal["paper", "slow_push", "push_release", "oblique", "push_change", "slide", "drive_release", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; push_change: ramp then held, then the operator raises, lowers or lifts the push unannounced (setup.json tells only the ramp and hold); slide: the bar, tilted by angle_deg, driven along its axis at a steady rate over ramp_s (default: the whole run), then held (travel control: the sample slides on the floor, and stops); drive_release: the bar driven in over ramp_s, held hold_s, drawn back over ramp_s (travel control: the tissue recovers); custom: the [bar] section as given")
+    name: Literal["paper", "slow_push", "push_release", "oblique", "push_change", "slide", "slide_reverse", "drive_release", "custom"] = Field("paper", description="paper: ramp then held; slow_push: the force rises all along; push_release: up, hold, down; oblique: ramp then held with the bar tilted; push_change: ramp then held, then the operator raises, lowers or lifts the push unannounced (setup.json tells only the ramp and hold); slide: the bar, tilted by angle_deg, driven along its axis at a steady rate over ramp_s (default: the whole run), then held (travel control: the sample slides on the floor, and stops); slide_reverse: the tilted bar driven in to reverse_at_mm over ramp_s, drawn back by reverse_by_mm over reverse_s, then driven on to peak_travel_mm by 90 % of the run and held (travel control: friction holds the sample where the bar left it until the bar comes back to it); drive_release: the bar driven in over ramp_s, held hold_s, drawn back over ramp_s (travel control: the tissue recovers); custom: the [bar] section as given")
     peak_force_n: float | None = Field(None, gt=0, description="the largest force in N (default: bar.force_n)")
-    peak_travel_mm: float | None = Field(None, gt=0, description="slide, drive_release: the bar's largest travel along its axis in mm (default: bar.travel_mm)")
-    ramp_s: float | None = Field(None, ge=0, description="paper/oblique/push_release/drive_release: duration of the rise in s (default: bar.ramp_s; push_release, drive_release: 1.5 s); slide: how long the bar is driven before it stops (default: the whole run)")
+    peak_travel_mm: float | None = Field(None, gt=0, description="slide, slide_reverse, drive_release: the bar's largest travel along its axis in mm (default: bar.travel_mm)")
+    ramp_s: float | None = Field(None, ge=0, description="paper/oblique/push_release/drive_release: duration of the rise in s (default: bar.ramp_s; push_release, drive_release: 1.5 s); slide: how long the bar is driven before it stops (default: the whole run); slide_reverse: how long the first drive in lasts (default: 40 % of the run)")
+    reverse_at_mm: float | None = Field(None, gt=0, description="slide_reverse: the travel in mm at which the bar turns back (default: 4/7 of peak_travel_mm)")
+    reverse_by_mm: float = Field(1.5, gt=0, description="slide_reverse: how far the bar is drawn back, in mm")
+    reverse_s: float = Field(1.5, gt=0, description="slide_reverse: how long the drawing back takes, in s")
     hold_s: float = Field(3.0, ge=0, description="push_release: time held at the peak in s")
     angle_deg: float = Field(25.0, ge=0, lt=60, description="oblique, slide: tilt of the bar from the vertical in degrees (in the x–y plane, pushing towards +x)")
     change_at_s: float | None = Field(None, gt=0, description="push_change: when the push starts to change, in s (default: 60 % of the run, after the paper's training frames)")
@@ -163,8 +166,8 @@ def apply_protocol(cfg: "TwinConfig") -> "TwinConfig":
     return cfg.model_copy(update={"bar": bar})
 
 
-#: protocols whose bar is driven (travel control, issue 41): its travel given, its force a result
-DRIVEN_PROTOCOLS = ("slide", "drive_release")
+#: protocols whose bar is driven (travel control): its travel given, its force a result
+DRIVEN_PROTOCOLS = ("slide", "slide_reverse", "drive_release")
 
 
 def _driven_bar(cfg: "TwinConfig", p: ProtocolConfig, end_s: float) -> BarConfig:
@@ -185,6 +188,21 @@ def _driven_bar(cfg: "TwinConfig", p: ProtocolConfig, end_s: float) -> BarConfig
                              "protocol.ramp_s")
         times, travel = ([0.0, stop], [0.0, peak]) if stop == end_s else ([0.0, stop, end_s], [0.0, peak, peak])
         bar.update(schedule_times_s=times, schedule_travel_mm=travel, direction=(math.sin(a), -math.cos(a), 0.0))
+    elif p.name == "slide_reverse":
+        a = math.radians(p.angle_deg)
+        turn = p.ramp_s if p.ramp_s is not None else 0.4 * end_s
+        back = turn + p.reverse_s
+        on = 0.9 * end_s
+        if not 0.0 < turn < back < on:
+            raise InputError(f"slide_reverse's drive in ({turn:g} s) and drawing back ({p.reverse_s:g} s) must end "
+                             f"before 90 % of the run ({on:g} s)", "protocol.ramp_s")
+        at = p.reverse_at_mm if p.reverse_at_mm is not None else 4.0 / 7.0 * peak
+        if not (p.reverse_by_mm < at < peak):
+            raise InputError(f"slide_reverse turns back at {at:g} mm: it must lie between the distance drawn back "
+                             f"({p.reverse_by_mm:g} mm) and the peak travel ({peak:g} mm)", "protocol.reverse_at_mm")
+        bar.update(schedule_times_s=[0.0, turn, back, on, end_s],
+                   schedule_travel_mm=[0.0, at, at - p.reverse_by_mm, peak, peak],
+                   direction=(math.sin(a), -math.cos(a), 0.0))
     else:   # drive_release
         ramp = p.ramp_s if p.ramp_s is not None else 1.5
         up, down = ramp, ramp + p.hold_s
@@ -230,21 +248,26 @@ PRESETS: dict[str, dict[str, Any]] = {
         "run": {"particle_frames_every": 10},
     },
 }
-# the therapy protocols (issue 19), each on the demo's resolution
+# the therapy protocols, each on the demo's resolution
 for _name, _extra in (("paper", {}), ("slow_push", {"peak_force_n": 1.0}), ("push_release", {"peak_force_n": 0.6}),
                       ("oblique", {"peak_force_n": 0.5}), ("push_change", {"peak_force_n": 0.5})):
     PRESETS[_name] = {**PRESETS["demo"], "protocol": {"name": _name, **_extra}}
 
-# the driven protocols (issue 41): millimetres of motion, so the finite-strain truth
+# the driven protocols: millimetres of motion, so the finite-strain truth
 for _name, _extra in (("slide", {"peak_travel_mm": 5.0, "angle_deg": 35.0}),
+                      ("slide_reverse", {"peak_travel_mm": 7.0, "angle_deg": 35.0, "ramp_s": 4.0}),
                       ("drive_release", {"peak_travel_mm": 3.0, "ramp_s": 2.0, "hold_s": 2.0})):
     PRESETS[_name] = {**PRESETS["demo"], "protocol": {"name": _name, **_extra}, "truth": {"solver": "finite_strain"}}
 # a slide carries the sample ~travel / sin(angle) along x (8.7 mm at 5 mm and 35°): room for it,
 # since the finite-element truth has no side walls (the twin refuses a truth that reaches them)
 PRESETS["slide"]["tank"] = {"size_mm": [64.0, 40.0, 36.0]}
+# a reversal needs the sample to slide while driven and to stay where the bar leaves it: a
+# floor as slippery as wet tissue on plastic (μ_f 0.15), not the default's 0.5, which holds it
+PRESETS["slide_reverse"]["tank"] = {"size_mm": [64.0, 40.0, 36.0]}
+PRESETS["slide_reverse"]["physics"] = {"friction": 0.15}
 
 Preset = Literal["default", "small", "demo", "paper", "slow_push", "push_release", "oblique", "push_change", "slide",
-                 "drive_release"]
+                 "slide_reverse", "drive_release"]
 
 
 def _merge(base: dict, extra: dict) -> dict:
