@@ -1,4 +1,4 @@
-"""The twins issue 19's and 39's benchmarks score on: one per therapy protocol, none the defaults.
+"""The twins the estimation and online benchmarks score on: one per therapy protocol, none the defaults.
 
 Each is a protocol preset (the demo's resolution: 0.3 mm pixels, 200 frames at 20 Hz,
 finite-element truth) with its own seed, shape, bar, material and push. They were
@@ -45,7 +45,7 @@ CASES: dict[str, tuple[str, dict]] = {
         "bar": {"radius_mm": 5.5},
         "protocol": {"peak_force_n": 0.6, "angle_deg": 20.0},
     }),
-    # issue 39: the push changes after the training frames, unannounced
+    # the push changes after the training frames, unannounced
     "push_change_s45": ("push_change", {
         "seed": 45,
         "blob": {"size_mm": [27.0, 17.0, 23.0], "lobes": 5, "irregularity": 0.12},
@@ -63,7 +63,7 @@ CASES: dict[str, tuple[str, dict]] = {
 }
 
 
-#: issue 41: twins whose bar is driven (travel control, finite-strain truth) so that they move
+#: twins whose bar is driven (travel control, finite-strain truth) so that they move
 #: millimetres in the validation window, and whose motion changes after the training frames —
 #: the drive stops within the window, unannounced to a filter that only sees the frames (a
 #: slide at a steady rate to the end is the constant-velocity Kalman filter's own case,

@@ -13,7 +13,7 @@
 
     python benchmarks/bench_bmode.py [--phantoms 6]
 
-Target (issue 3): >= 20 frames/s for 256 x 256 on 2 cores.
+Target: >= 20 frames/s for 256 x 256 on 2 cores.
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ push; finite-element truth, B-mode images), in one run:
    same inputs and its DSC above all of them; online ≤ ½ of the online surrogate's.
 
 Prints JSON: per twin and method the recovered F/E, β1/E, ν, β2 against the truth, the
-Table 4 scores, the timings, and issue 19's targets each as true/false, with a summary
+Table 4 scores, the timings, and the targets each as true/false, with a summary
 over all twins at the end.
 
 Usage (run it alone: parallel jobs slow each other's timings)::
@@ -38,7 +38,7 @@ Usage (run it alone: parallel jobs slow each other's timings)::
 
 ``--compare-search`` calibrates each twin a second time with the other search model
 (``CalibrationSettings.search_integrator``: the search model's reduced model or its full
-runs; ``--peer-set`` gives the peer's settings whole) and reports issue 39's calibration
+runs; ``--peer-set`` gives the peer's settings whole) and reports the reduced search's calibration
 targets: ≤ 30 s, and a validation DSC within 0.001 and a centroid within 0.01 mm of the
 implicit search's fit. Issue 39's comparison is against today's default calibration::
 
@@ -63,13 +63,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-#: issue 19's thresholds
+#: the estimation's thresholds
 DSC_MEAN, DSC_MIN, CENTROID_MM = 0.97, 0.95, 0.3
 PARAMETER_REL, POISSON_ABS = 0.10, 0.03
 CALIBRATION_S, PREDICT_SPEEDUP = 120.0, 10.0
-#: issue 39's: calibration on the reduced search model, its fit as good as the implicit search's
+#: the reduced search's: calibration on the reduced search model, its fit as good as the implicit search's
 REDUCED_CALIBRATION_S, FIT_DSC, FIT_CENTROID_MM = 30.0, 0.001, 0.01
-#: issue 41's: the driven protocols, and how far their twins' section centroid moves in the validation window
+#: the driven protocols', and how far their twins' section centroid moves in the validation window
 DRIVEN, WINDOW_MOTION_MM = ("slide", "drive_release"), 2.0
 
 
@@ -219,7 +219,7 @@ def targets(protocol: str, r: dict) -> dict:
             t[f"{name}_within_{PARAMETER_REL:.0%}"] = abs(rec[name]["rel_error"]) <= PARAMETER_REL
         t[f"poisson_within_{POISSON_ABS}"] = abs(rec["poisson_ratio"]["fit"] - rec["poisson_ratio"]["truth"]) <= POISSON_ABS
     if protocol in DRIVEN:
-        # issue 41: a third of holding still and of the Kalman filter; the material (a driven bar
+        # a driven bar's: a third of holding still and of the Kalman filter; the material (a driven bar
         # pushes no force: β1/E and ν are what the data fix); the twin itself moves millimetres
         best = min(hold["centroid_mean_mm"], kal["centroid_mean_mm"])
         t["centroid<=third_of_hold_and_kalman"] = v["centroid_mean_mm"] <= best / 3
@@ -298,7 +298,7 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
         out["methods"][method] = r
         _tell(twin.name, method, r)
         if args.compare_search:
-            # the same calibration with the other search model, in the same run: issue 39's
+            # the same calibration with the other search model, in the same run: the reduced search's
             # calibration target (≤ 30 s, the fit as good as the implicit search's)
             ours = r["calibration_settings"]["search_integrator"]
             other = "implicit" if ours == "reduced" else "reduced"
@@ -348,7 +348,7 @@ def _tell(name: str, label: str, r: dict) -> None:
 
 
 def search_comparison(reduced: dict, implicit: dict) -> dict:
-    """The reduced search model's calibration against the implicit one's (issue 39's targets)."""
+    """The reduced search model's calibration against the implicit one's (the reduced search's targets)."""
     vr, vi = reduced["physics"]["validation"], implicit["physics"]["validation"]
     d_dsc = vr["dsc_mean"] - vi["dsc_mean"]
     d_centroid = vr["centroid_mean_mm"] - vi["centroid_mean_mm"]
@@ -381,7 +381,7 @@ def main() -> None:
                     help="the drives that reverse (REVERSAL_CASES: finite-strain truth, ~17 min each to make), where "
                     "the physics is measured against every predictor that knows the same inputs")
     ap.add_argument("--large-motion", action="store_true",
-                    help="issue 41's driven twins (LARGE_MOTION_CASES: finite-strain truth, ~25 min each to make)")
+                    help="the driven twins (LARGE_MOTION_CASES: finite-strain truth, ~25 min each to make)")
     ap.add_argument("--work", type=Path, default=ROOT / ".bench" / "twins", help="where the twins are generated")
     ap.add_argument("--methods", default="least_squares,table1,cmaes")
     ap.add_argument("--training", choices=["tracked", "expert"], default="tracked")
@@ -398,7 +398,7 @@ def main() -> None:
                     "physics calibrated again on the earlier ones) and score the winner: the product's choice")
     ap.add_argument("--no-bar-cap", action="store_true", help="do not continue the sweep's top under the bar")
     ap.add_argument("--compare-search", action="store_true",
-                    help="also calibrate with the other search model (reduced/implicit) and compare (issue 39)")
+                    help="also calibrate with the other search model (reduced/implicit) and compare")
     ap.add_argument("--peer-set", default=None,
                     help="--compare-search's peer settings in --set's form (default: --set's with the other search "
                     "model), e.g. 'search_integrator=implicit' for the default calibration against "
@@ -448,7 +448,7 @@ def main() -> None:
     }
     driven = {n: tw for n, tw in out["twins"].items() if tw["protocol"] in DRIVEN}
     if driven:
-        # issue 41 measures its targets on at least three twins that each move ≥ 2 mm in the window
+        # the driven targets are measured on at least three twins that each move ≥ 2 mm in the window
         moving = sorted(n for n, tw in driven.items()
                         if any(r["validation_window_motion_mm"] >= WINDOW_MOTION_MM for r in tw["methods"].values()))
         out["summary"][f"driven_twins_moving>={WINDOW_MOTION_MM}mm_in_validation"] = moving

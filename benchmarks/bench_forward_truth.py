@@ -1,4 +1,4 @@
-"""The fitted model against a twin's truth at the truth's own parameters (issue 19).
+"""The fitted model against a twin's truth at the truth's own parameters.
 
 Runs the paper-resolution model (the fast path, ``integrator = "implicit"``) of a twin's
 observation with the parameters the twin was made with, and compares the displacement

@@ -26,12 +26,12 @@ the displacement RMS and the carried disc's DSC/centroid against the known truth
 
     python benchmarks/bench_observation.py [--work .bench/observation] [--quick]
 
-Targets (issue 17): RMS ≤ 0.1 mm at every frame; DSC ≥ 0.98 and centroid ≤ 0.15 mm at
+Targets: RMS ≤ 0.1 mm at every frame; DSC ≥ 0.98 and centroid ≤ 0.15 mm at
 every frame; ≤ 10 ms per 256 × 256 frame; better than every peer on every twin.
 
 Every twin also reports the displacement's error per band of the tissue's true in-plane strain
 (``displacement_by_strain``: speckle decorrelates as the tissue strains). ``--large-motion``
-runs bench_estimation's driven twins instead (issue 41: the sample slides millimetres) and a
+runs bench_estimation's driven twins instead (the sample slides millimetres) and a
 push that strains the section 20–40 % (``STRAIN_TWINS``); targets centroid ≤ 0.2 mm and
 displacement RMS ≤ 0.15 mm at every frame.
 
@@ -64,7 +64,7 @@ TWINS = {
 }
 
 
-#: issue 41: a push that strains the section 20–40 % (the slides of --large-motion strain it
+#: a push that strains the section 20–40 % (the slides of --large-motion strain it
 #: ≤ 6 %): a bar driven 4 mm into a soft sample and drawn back, on the finite-strain truth
 STRAIN_TWINS = {
     "drive_release_s52": ("drive_release", {
@@ -125,7 +125,7 @@ def displacement_errors(series, truth, visible: list[np.ndarray]) -> dict:
 
 
 #: strain bands (the largest in-plane principal Green–Lagrange strain's magnitude) over which the
-#: tracking's displacement error is reported: speckle decorrelates as the tissue strains (issue 41)
+#: tracking's displacement error is reported: speckle decorrelates as the tissue strains
 STRAIN_BANDS = (0.0, 0.05, 0.1, 0.2, 0.3, 0.4, np.inf)
 
 
@@ -431,7 +431,7 @@ def main(argv=None) -> int:
     ap.add_argument("--estimators", default="farneback,dis,ilk", help="optical flows to compare")
     ap.add_argument("--quick", action="store_true", help="one twin, our estimator only, a 4-frame PyMUST cine")
     ap.add_argument("--large-motion", action="store_true",
-                    help="issue 41: the large-motion twins of bench_estimation (_estimation_twins.LARGE_MOTION_CASES, "
+                    help="the large-motion twins of bench_estimation (_estimation_twins.LARGE_MOTION_CASES, "
                          "made or re-used in --twins-work) and a push that strains the tissue 20–40 %% "
                          "(STRAIN_TWINS), with their own targets")
     ap.add_argument("--twins-work", type=Path, default=Path(".bench") / "twins",
@@ -484,7 +484,7 @@ def main(argv=None) -> int:
         "a_twin_moves_3mm": any(t["true_centroid_shift_mm"] >= 3.0 for t in twins),
         "pymust_rms_le_0.1mm": out["pymust_cine"].get("rms_max_mm", 1e9) <= 0.1,
     }
-    if args.large_motion:      # issue 41's targets for tracking through millimetres and 20–40 % strain
+    if args.large_motion:      # the targets for tracking through millimetres and 20–40 % strain
         out["targets"] = {
             "centroid_le_0.2mm_every_frame": some and all(o["centroid_max_mm"] <= 0.2 for o in ours),
             "displacement_rms_le_0.15mm_every_frame": some and all(d["rms_max_mm"] <= 0.15 for d in disp),

@@ -12,7 +12,7 @@ model, not the fit) and at F/E × 0.5, 0.7, 1.4 and 2:
   same push at each F/E, on one core;
 * the contour points A of both are compared: the RMS over the points of the difference
   of their displacement since frame 0, over the frames, against the implicit path's RMS
-  motion (issue 39: within 3 % at K and at F/E × 0.5 and × 2). × 0.5 and × 2 are the
+  motion (within 3 % at K and at F/E × 0.5 and × 2). × 0.5 and × 2 are the
   snapshots' own forces; × 0.7, × 1.4 and K itself are forces the modes never saw.
 
 Prints JSON: per twin and F/E the wall times, speed-ups (implicit / reduced; simulated
@@ -60,7 +60,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-#: issue 39's thresholds
+#: the online loop's thresholds
 SPEEDUP_OVER_IMPLICIT, REALTIME_FACTOR, POINT_ERROR = 100.0, 20.0, 0.03
 SCALES = (1.0, 0.5, 2.0, 0.7, 1.4)
 SNAPSHOT_SCALES = (0.5, 2.0)

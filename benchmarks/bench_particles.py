@@ -6,7 +6,7 @@ counts (within a few %) — an ellipsoidal tissue 30 × 18 × 24 mm on the floor
 a small tank, a shallow pool, a steel bar — settles it briefly, then times
 ``--steps`` solver steps of the push. Printed: particle counts, steps per
 second, simulated seconds per wall second (real-time factor), time per step
-and peak memory. Target (issue 6): ≥ 100 steps/s on 2 cores (measured: 115–125
+and peak memory. Target: ≥ 100 steps/s on 2 cores (measured: 115–125
 with Numba's default OpenMP layer on an idle machine; 82–84 with the workqueue
 layer; see docs/decisions.md for shared cores). For reference
 (not run here): SPlisHSPlasH's DFSPH with Becker elasticity ran ≈ 28 steps/s
@@ -14,7 +14,7 @@ for 6,270 particles on this kind of machine.
 
 It then runs 10 s of the synthetic twin's push (its material, bar and frame rate) on the
 fast path (:mod:`hifumotion.creep`) at ``--fast`` tissue particle counts and reports wall
-time, real-time factor (target ≥ 10 at 4,399 and ≥ 50 at 1,000, issue 18), steps,
+time, real-time factor (target ≥ 10 at 4,399 and ≥ 50 at 1,000), steps,
 factorisations, the worst penetration, and the speed-up over the explicit path above.
 
     python benchmarks/bench_particles.py --json

@@ -29,7 +29,7 @@ the start scaled about its centre by 1/0.7, the factor by which the shared
 sets' starts were shrunk from the expert region: what the start's size alone
 knows (``docs/decisions.md``).
 
-Targets (issue 20): GLCV mean DSC >= the best peer + 0.03 on each set from each
+Targets: GLCV mean DSC >= the best peer + 0.03 on each set from each
 start; <= 0.05 s per 300x300 and <= 0.3 s per 800x540 image on one core.
 """
 

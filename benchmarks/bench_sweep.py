@@ -20,7 +20,7 @@ pool's floor and the resting bar excluded as ``hifumotion run`` does) and recons
 
     python benchmarks/bench_sweep.py [--methods glcv,lcv,cv,gac,glcv+plane_start=neighbour] [--twins a,b]
 
-Target (issue 20): GLCV's reconstructed volume within 5 % of the truth on every twin.
+Target: GLCV's reconstructed volume within 5 % of the truth on every twin.
 """
 
 from __future__ import annotations

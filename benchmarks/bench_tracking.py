@@ -11,7 +11,7 @@ with the same per-frame iteration budget.
 
     python benchmarks/bench_tracking.py --frames 60
 
-Target (issue 20): <= 5 ms per 256 x 256 frame (``ms_per_frame_wall``).
+Target: <= 5 ms per 256 x 256 frame (``ms_per_frame_wall``).
 """
 
 from __future__ import annotations

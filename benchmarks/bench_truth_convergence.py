@@ -19,7 +19,7 @@ best rigid motion (the shape's own difference) and the turn between the two (deg
 rotation vector); each one's own turn since frame 0; the truth's RMS motion; the variant's mesh
 size, steps and wall time. Each variant's line also goes to stderr as it ends. A converged
 truth moves the same under each variant, within a small fraction of its motion. The twins' earlier sweeps were
-made on a push (docs/decisions.md, issue 41); a slide's convergence is the question here::
+made on a push (docs/decisions.md, "A finite-strain truth on FElupe"); a slide's convergence is the question here::
 
     python benchmarks/bench_truth_convergence.py .bench/twins/slide_stop_s49-*/ --variants mesh,penalty
     python benchmarks/bench_truth_convergence.py TWIN --quick        # the first 2 s, penalty and slip

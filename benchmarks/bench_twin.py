@@ -1,6 +1,6 @@
 """The synthetic experiment: generation time, the resolution floor, the mass-scaling tolerance (JSON).
 
-Three measurements (issue 7's checks):
+Three measurements (the twin's checks):
 
 * ``generate`` — wall time of the whole twin (``hifumotion experiment``'s work) for the
   preset, with its stage timings and particle counts. Target: ≤ 5 min on 2 cores

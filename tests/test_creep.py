@@ -65,7 +65,7 @@ def test_block_under_its_weight_sinks_by_the_analytic_amount_and_not_into_the_fl
 def test_a_round_bottomed_sample_settles_into_an_equilibrium_that_then_holds():
     # a conformed ellipsoid rests on a few floor nodes: a near-hinge whose soft mode the contact
     # rounds' loose solves do not resolve. Its settled state (frame 0) must be an equilibrium:
-    # with nothing applied afterwards, nothing moves (before session 29 it leaned back 0.4 mm)
+    # with nothing applied afterwards, nothing moves (a voxel surface short of the sample's once leaned it back 0.4 mm)
     from hifumotion.creep.scene import scene_material, tissue_mesh
     from hifumotion.particles.scene import Scene
 
@@ -230,7 +230,7 @@ def test_fast_path_agrees_with_the_finite_element_reference():
     u_ref = ref.at(mesh.centres_mm)
     rms = math.sqrt(((u_fast - u_ref) ** 2).sum(1).mean())
     # measured 0.036 of the peak at 2 mm (0.032 at 2.2 mm), with the model's rim rounded at half a
-    # spacing (1 mm of the 6 mm bar here). Before session 29 it was 0.154: the boundary voxels
+    # spacing (1 mm of the 6 mm bar here). It was once 0.154: the boundary voxels
     # were left a staircase where conforming them would flatten them below ⅕ of a cube, and the
     # settled ellipsoid, resting on two floor nodes, leaned 0.7 mm (its soft mode left by the
     # contact rounds' loose solve) — docs/decisions.md, "The voxels meet the surface"
@@ -853,7 +853,7 @@ def test_a_tilted_bar_slides_a_reduced_ellipsoid_on_a_rough_floor_as_the_full_mo
     assert deepest >= -0.01 * base.particles.spacing_mm * MM      # penetration ≤ 1 % of the spacing
 
 
-# -- corotational kinematics (issue 41, part 3) ----------------------------------------------------
+# -- corotational kinematics ------------------------------------------------------------------------
 
 def _elastica_tip(alpha: float) -> tuple[float, float]:
     """The inextensible Euler–Bernoulli cantilever under its own weight (α = qL³/EI), solved here as

@@ -352,7 +352,7 @@ class ReducedFrictionEvaluator(FrictionEvaluator):
     """A reduced model of the friction evaluator, made around a centre: its friction term is the
     truth's within a factor 1.3 of the μ_f it was made at, and beyond it fades into a false one
     that holds a stick at μ_f 0.9 for a slide (the reduced model that slides on at any μ_f,
-    docs/decisions.md, issue 41, session 35)."""
+    docs/decisions.md, "The reduced search fits the friction within its trust region")."""
 
     ACCURATE, FALSE_MU = np.log(1.3), 0.9
 
@@ -458,7 +458,7 @@ def test_a_reduced_fit_the_full_model_fits_worse_than_the_start_is_not_kept():
 class BiasedReducedEvaluator(FrictionEvaluator):
     """A reduced model that misses the full one by a fixed residual pattern, as a reduced model
     misses even its own snapshot's run where the sample sticks and slips (docs/decisions.md,
-    issue 41, session 37); the full model is the friction evaluator's exact residuals."""
+    "The reduced model misses its own snapshot"); the full model is the friction evaluator's exact residuals."""
 
     def __init__(self, truth: Parameters):
         super().__init__(truth)

@@ -1,4 +1,4 @@
-"""The finite-strain tissue law (issue 41) against closed-form solutions at 30 % strain.
+"""The finite-strain tissue law against closed-form solutions at 30 % strain.
 
 A cube compressed between frictionless plates at a constant rate deforms homogeneously, so its
 force has a closed form: for an incompressible neo-Hookean solid the nominal stress is
@@ -118,7 +118,7 @@ def test_a_block_under_a_held_force_creeps_as_kelvin_voigt():
 
 
 def test_a_block_under_a_driven_bar_takes_the_kelvin_voigt_force_of_its_travel():
-    """Travel control (issue 41, part 2): the same block with the bar's face driven at a steady
+    """Travel control: the same block with the bar's face driven at a steady
     rate v to 1 % strain (ν = 0, μ = β1): its advance is the travel and the force it takes
     A (E v t + 2 μ v) / h, the elastic and the viscous stress of the small-strain closed form
     (backward Euler is exact on a steady rate; finite strain moves it by O(ε))."""
@@ -239,12 +239,12 @@ def test_the_bar_comes_to_rest_on_the_first_point_its_rounded_end_meets():
 
 
 def test_a_block_let_go_by_a_driven_bar_recovers_as_kelvin_voigt():
-    """Push and release (issue 41): the block of the driven-bar test pressed to 1 % strain,
+    """Push and release: the block of the driven-bar test pressed to 1 % strain,
     then the bar drawn back at 20 mm/s — far faster than the tissue recovers (E/2μ × 0.1 mm =
     1 mm/s) — so the face lets go and the block recovers freely, ε' = −(E/2μ) ε: backward Euler
     divides its compression by 1 + E Δt/2μ each step, and the bar takes no force and ends where
     its schedule puts it. (Weightless, the expanding block also pushes itself off the floor, so
-    the compression is its top's sink less its bottom's.) Before session 28 Newton failed at
+    the compression is its top's sink less its bottom's.) Newton once failed at
     the first step that drew the bar back."""
     pytest.importorskip("tetgen")
     import trimesh

@@ -34,7 +34,7 @@ touched** (its own normal ``n``), which the bar carries along its axis ``a``: it
 displacement is prescribed as ``const + (a·n) s``. At each step's end the tangent planes are
 taken again where the contacts now are (:meth:`ContactSet.refresh_bar`): a node that slides
 off the face turns over the rim onto the side, whose normal, across the axis, no longer
-pushes it. Why the whole solid and a rounded edge (docs/decisions.md, issue 41): a node
+pushes it. Why the whole solid and a rounded edge (docs/decisions.md, "The bar is a solid with a rounded rim"): a node
 held on the face's unbounded plane beyond the rim is pushed by a face that is not there;
 released there, tissue beside the rim that a sliding sample brings under the disc is
 already behind the face's plane, and held on it at once is moved that whole depth in one

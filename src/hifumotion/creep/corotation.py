@@ -18,7 +18,7 @@ rotations taken at the step's predictor and again by its rounds while the soluti
 (a Picard iteration inside the step, :meth:`Corotation.moved`). The
 viscosity's matrix turns with its voxel too, and its shear rate is read in the voxel's frame.
 The material law stays linear in the rotated frame: large rotations are exact, large
-stretches are not (docs/decisions.md, issue 41, part 3).
+stretches are not (docs/decisions.md, "Large deformations on the fast path").
 """
 
 from __future__ import annotations

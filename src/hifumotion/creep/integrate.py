@@ -173,7 +173,7 @@ class CreepSolver:
         self.diag_index = np.flatnonzero(rows == self.assembly.indices)
         if punch is not None:
             # the rim rounded at the bar's own edge or at the mesh's resolution, whichever is the
-            # rounder (contact.py: why the edge is rounded; docs/decisions.md, issue 41, session 29)
+            # rounder (contact.py: why the edge is rounded; docs/decisions.md, "The voxels meet the surface")
             own = punch.edge_radius_m or 0.0
             punch = replace(punch, edge_radius_m=min(max(own, self.settings.bar_edge_spacings * self.dx_m),
                                                      punch.radius_m))

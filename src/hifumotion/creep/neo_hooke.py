@@ -3,8 +3,8 @@
 The paper's Eq. 13 measures strain by Green–Saint-Venant; the twins' truth is a neo-Hookean
 solid (:mod:`hifumotion.reference.finite_strain`). Under a bar driven 30–40 % into the
 tissue, linear elasticity — small-strain or corotated (:mod:`.corotation`) — is softer in
-compression than that law, and the section's shape shows it (docs/decisions.md, issue 41,
-part 3). Here each voxel stores the strain energy
+compression than that law, and the section's shape shows it (docs/decisions.md,
+"Large deformations on the fast path"). Here each voxel stores the strain energy
 
     W = μ/2 (J^(−2/3) I₁ − 3) + κ/2 (J − 1)²,        I₁ = tr FᵀF,  J = det F,
 

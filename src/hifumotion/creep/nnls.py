@@ -4,8 +4,8 @@ The reduced model's contact solve (:meth:`~hifumotion.creep.reduced.ReducedCreep
 least-distance problem that Lawson & Hanson reduce to NNLS (Solving Least Squares Problems,
 1974, ch. 23): ``min |E w − f|`` over ``w ≥ 0``, one column of E per contact row. Steps a
 frame apart press nearly the same rows, but SciPy's NNLS starts every call from an empty
-passive set and spends most of a step there (docs/decisions.md, issue 39: 28 of the online
-filter's 53 ms a frame at 4,441 particles, 4.7 ms a call). Here Lawson & Hanson's algorithm
+passive set and spends most of a step there (docs/decisions.md, "The filter's step: NNLS started
+warm": 28 of the online filter's 53 ms a frame at 4,441 particles, 4.7 ms a call). Here Lawson & Hanson's algorithm
 starts from the rows the last solve pressed (the warm start of Bro & De Jong, J.
 Chemometrics 1997): the guessed set is first pruned to a feasible one, then the usual outer
 loop adds the column of largest gradient and the inner loop keeps the iterate

@@ -110,7 +110,7 @@ class ReducedSettings:
         The floor's and the bar's face's normal reactions scaled to what the sample's balance
         gives each (the net weight, the bar's push; :meth:`~.reduced_friction.ReducedFriction.balanced`):
         the candidates' own rows carried a tenth of it on a stuck slide. Off by default: measured
-        mixed (docs/decisions.md, issue 39, session 33). False takes the rows as they are.
+        mixed (docs/decisions.md, "A friction the reduced model is run at"). False takes the rows as they are.
     friction_rounds, friction_rtol
         A step re-linearises the friction at most this many times, until the law holds to
         ``friction_rtol`` of each node's μ_f λ_n.

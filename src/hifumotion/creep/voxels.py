@@ -96,7 +96,7 @@ __all__ = ["VoxelMesh", "voxel_mesh", "CORNERS"]
 
 #: The smallest corner Jacobian (a fraction of the undistorted cube's, Δx³/8) :func:`conform`
 #: lets a boundary voxel reach. The boundary's fidelity, not the voxels' shape, decides a
-#: contact: at ⅕ (before session 29) one boundary node in seven of a reconstructed sample
+#: contact: at ⅕ one boundary node in seven of a reconstructed sample
 #: (s47, 4,399 particles) stayed more than ¼ Δx outside the surface, and the fast path's
 #: pressed push was 11 % of its peak off the P2 reference; at 1/100 one in a hundred, and
 #: 4.4 % (docs/decisions.md, "The voxels meet the surface").

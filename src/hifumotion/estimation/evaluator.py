@@ -346,7 +346,7 @@ class Evaluator:
         thetas = [np.clip(np.asarray(t, float), self.space.lower, self.space.upper) for t in thetas]
         # one thread a run, always: a run on two threads is not bitwise repeatable (its sums in
         # another order), and a near-stick amplifies the last digits into another fit; two threads
-        # made a 1,000-particle slide only 1.2× faster (docs/decisions.md, issue 41, session 36)
+        # made a 1,000-particle slide only 1.2× faster (docs/decisions.md, "Each reduced fit checked by the full model")
         futures = [self._client.submit(full_run_task, self._remote[0], self._remote[1], self.space.parameters(t), n,
                                        1, pure=False) for t in thetas]
         out = []

@@ -6,7 +6,7 @@ training frames cannot show that, since the fit matches them either way. On the 
 slide_stop_s50 the 1,000-particle model at the true parameters missed the validation frames by
 0.47 mm and the 4,399-particle one by 0.10 mm. The fit's points A moved up to 0.54 mm apart
 between 1,000 and 2,000 particles, against 0.22–0.24 mm on three slides the 1,000-particle model
-does resolve (docs/decisions.md, issue 41, session 38).
+does resolve (docs/decisions.md, "A resolution check on the fit").
 
 :func:`resolution_check` runs the fitted model at the fit on the model's lattice and on one with
 ``factor`` times the particles (a convergence check on the mesh, as any finite-element study

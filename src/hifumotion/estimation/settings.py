@@ -87,9 +87,9 @@ class CalibrationSettings(ConfigModel):
     force_n: float = Field(paper.FORCE_N, ge=1e-6, le=1e3, description="nominal pushing force in N, 10⁻⁶ … 10³ (the data fix only F/E)")
     search_particles: int = Field(1000, ge=100, le=1_000_000, description="tissue particles of the coarser model the search runs on")
     search_integrator: Literal["implicit", "reduced"] = Field(
-        "implicit", description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre from two full runs, again from every full run so far wherever a full run finds it off — at the design's best start and at a fit — then, if the final model is finer, the final model's own around the search's optimum; docs/decisions.md, issues 39 and 41)")
+        "implicit", description="the search model's integrator: implicit (its full runs) or reduced (its POD–Galerkin model, made around the design's centre from two full runs, again from every full run so far wherever a full run finds it off — at the design's best start and at a fit — then, if the final model is finer, the final model's own around the search's optimum; docs/decisions.md, \"Calibration on reduced models\")")
     reduced_friction_trust: float = Field(
-        1.25, gt=1.0, le=100.0, description="with the reduced search and a fitted friction: each search on a reduced model keeps μ_f within this factor of the μ_f the model was made at (two sliding snapshots do not show a stick far above it: docs/decisions.md, issue 41, session 35)")
+        1.25, gt=1.0, le=100.0, description="with the reduced search and a fitted friction: each search on a reduced model keeps μ_f within this factor of the μ_f the model was made at (two sliding snapshots do not show a stick far above it: docs/decisions.md, \"The reduced search fits the friction within its trust region\")")
     reduced_rounds: int = Field(
         3, ge=0, le=20, description="with the reduced search: how many more times the reduced model is made again around a fit where the full model disagrees with it (or whose μ_f stopped at the edge of the trust region), and searched from there")
     reduced_agreement: float = Field(
@@ -97,7 +97,7 @@ class CalibrationSettings(ConfigModel):
     full_model_check: bool = Field(
         True, description="with the reduced search: each fit checked by one run of the full model, which becomes a snapshot of the model made again where the two disagree; the check's residuals recorded beside the reduced model's")
     reduced_correction: bool = Field(
-        True, description="with the reduced search and its full-model checks: each search runs on the reduced model's residuals plus the full model's miss at the point the model was made around (the residuals' difference there, known from its check), so that the searched model and the full one agree there (zero-order consistency of a trust-region model: Alexandrov et al. 1998; docs/decisions.md, issue 41, session 37)")
+        True, description="with the reduced search and its full-model checks: each search runs on the reduced model's residuals plus the full model's miss at the point the model was made around (the residuals' difference there, known from its check), so that the searched model and the full one agree there (zero-order consistency of a trust-region model: Alexandrov et al. 1998; docs/decisions.md, \"The reduced search corrected by the full model's miss at its centre\")")
     max_evaluations: int = Field(8, ge=1, le=10_000, description="least squares: residual evaluations (each with a Jacobian)")
     cma_generations: int = Field(12, ge=1, le=10_000, description="CMA-ES: generations")
     threshold_mm_per_point: float | None = Field(

@@ -17,7 +17,7 @@ coordinate     parameter           default bounds
 =============  ==================  ===========================
 
 The friction of the floor and the bar's face is a coordinate only when the space is given its
-bounds (``friction``): a driven bar's slide is set by it (issue 41) — with a force-held bar the
+bounds (``friction``): a driven bar's slide is set by it — with a force-held bar the
 push hardly slides the sample, and it stays the model's setting.
 
 The reported E and β1 are then "at the nominal force": what the data determine are

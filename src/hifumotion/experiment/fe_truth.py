@@ -70,12 +70,12 @@ def fe_problem(cfg, blob: Blob, placement_mm: np.ndarray) -> tuple[CreepingTissu
     return problem, lift
 
 
-#: the largest penetration of a contact a twin may have, as a fraction of the particle spacing (issue 41)
+#: the largest penetration of a contact a twin may have, as a fraction of the particle spacing
 PENETRATION_OF_SPACING = 0.01
 
 
 def physicality(stats: dict, spacing_mm: float) -> dict:
-    """A finite-strain truth's checks (issue 41): no inverted element (J > 0 at every
+    """A finite-strain truth's checks: no inverted element (J > 0 at every
     quadrature point of every frame), no tissue node inside the floor or the bar (its face, rim
     or side) by more than ``PENETRATION_OF_SPACING`` of the particle spacing, and the largest
     strain the law was held to."""

@@ -3,7 +3,7 @@
 - :mod:`.finite_elements` — a static punch (the particle framework's reference);
 - :mod:`.creep_fe` — the twin's truth, small strain (scikit-fem);
 - :mod:`.finite_strain`, :mod:`.finite_strain_push` — the same physics at finite strain
-  (FElupe; issue 41), for pushes that strain the tissue beyond what small strain holds.
+  (FElupe), for pushes that strain the tissue beyond what small strain holds.
 
 Nothing here imports the models it checks (:mod:`hifumotion.particles`, :mod:`hifumotion.creep`).
 """

@@ -1,4 +1,4 @@
-"""The twin's physics at finite strain: the tissue pushed by the bar, on FElupe (issue 41, part 1).
+"""The twin's physics at finite strain: the tissue pushed by the bar, on FElupe.
 
 The problem is :class:`~.creep_fe.CreepingTissue`'s — the same tissue surface, law, pool, bar
 and force schedule — and so is the answer (:class:`~.creep_fe.CreepFESolution`: the P2 nodes'
@@ -59,7 +59,7 @@ class FiniteStrainSettings:
     own measure at 10⁻⁴ (which bounded the residual by ~3 % of the push) and the settle under
     gravity converges (it did not: its shape changed by half with the mesh); below ~10⁻³ the
     contacts' penalty switching holds Newton's residual near 4 × 10⁻⁴ of the push and the
-    steps crawl (docs/decisions.md, issue 41)."""
+    steps crawl (docs/decisions.md, "A finite-strain truth on FElupe")."""
 
     step_s: float = 0.05
     contact_multiplier: float = 100.0
@@ -353,7 +353,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     # Newton stops when the free residual (N) is below newton_tol × (this solve's push + the
     # tissue's weight). FElupe's own measure divides the residual by 10⁻³ + |the floor's
     # reaction| (≈ that sum itself), which let it stay at a few % of the push and, in the
-    # settle, at a tenth of the weight (docs/decisions.md, issue 41, session 25)
+    # settle, at a tenth of the weight (docs/decisions.md, "A finite-strain truth on FElupe")
     weight_n = float(np.abs(weight.force).sum())
 
     def solve(items, force_n: float) -> bool:
@@ -397,7 +397,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
     floor_y = floor_point[1] - touch                     # the floor's plane (the sample's lowest point at rest)
 
     def measure() -> dict:
-        """This frame's physicality (docs/decisions.md, issue 41): the smallest volume ratio J
+        """This frame's physicality (docs/decisions.md, "A finite-strain truth on FElupe"): the smallest volume ratio J
         and the largest principal strain |λ − 1| over the quadrature points; how far the
         tissue's nodes lie inside the floor and inside the bar (its face, rim or side: every
         node, the penalty contacts' penetration)."""
@@ -433,7 +433,7 @@ def finite_strain_reference(problem: CreepingTissue, times_s: np.ndarray, settin
                     # prescribed increment, FElupe's line search judges it by the residual's
                     # linearisation, which knows nothing of the contacts it opens or closes, and
                     # rejected every step once the face had let go of the tissue (a release) or
-                    # not yet met it (docs/decisions.md, issue 41)
+                    # not yet met it (docs/decisions.md, "A finite-strain truth on FElupe")
                     bar_at = at_rest + float(problem.travel_mm(t + dt)) * axis
                     boundaries["bar"].update(bar_at)
                     u.values[bar_point] = bar_at
