@@ -348,6 +348,23 @@ def test_a_reduced_models_friction_trust_region_is_cut_by_the_space():
     assert SearchSpace().friction_within(SearchSpace().theta(k), 1.25) == SearchSpace()
 
 
+def test_the_fits_coordinates_are_addressed_by_name():
+    """Each coordinate's place in θ is its place in the space's names; setting one by name
+    changes that one only, and a coordinate the space does not fit is refused by name."""
+    from hifumotion.estimation.space import FRICTION_BOUNDS, FRICTION_NAME
+
+    space = SearchSpace(friction=FRICTION_BOUNDS)
+    k = Parameters(0.25, 9000.0, 0.45, 2e5, 0.5, friction=0.1)
+    theta = space.theta(k)
+    assert theta[space.index("nu")] == 0.45 and theta[space.index(FRICTION_NAME)] == pytest.approx(np.log(0.1))
+    moved = space.with_value(theta, FRICTION_NAME, np.log(0.3))
+    assert space.parameters(moved).friction == pytest.approx(0.3)
+    assert space.parameters(moved).replaced(friction=0.1).as_dict() == pytest.approx(space.parameters(theta).as_dict())
+    assert np.array_equal(theta, space.theta(k))      # the original is left as it was
+    with pytest.raises(KeyError, match="log_mu"):
+        SearchSpace().index(FRICTION_NAME)
+
+
 class ReducedFrictionEvaluator(FrictionEvaluator):
     """A reduced model of the friction evaluator, made around a centre: its friction term is the
     truth's within a factor 1.3 of the μ_f it was made at, and beyond it fades into a false one
