@@ -164,13 +164,33 @@ def twin_folder(work: Path, name: str) -> Path:
     from hifumotion.io import output_folder
 
     cfg = case_config(name)
-    key = hashlib.sha256(json.dumps(cfg.model_dump(mode="json"), sort_keys=True).encode()).hexdigest()[:10]
+    today = json.loads(cfg.model_dump_json())
+    key = hashlib.sha256(json.dumps(today, sort_keys=True).encode()).hexdigest()[:10]
     folder = Path(work) / f"{name}-{key}"
     if (folder / "truth" / "motion.json").is_file():
         return folder
+    # a twin made before a setting was added (its default what the twin was made without) is
+    # the same twin: its settings read by today's code are today's
+    for made in sorted(Path(work).glob(f"{name}-*")):
+        if _made_with(made) == today:
+            return made
     with output_folder(folder, overwrite=False) as out:
         generate_twin(cfg, out)
     return folder
+
+
+def _made_with(folder: Path) -> dict | None:
+    """A generated twin's settings (``truth/parameters.json``'s ``config``) as today's code reads
+    them; None where the folder is not a complete twin or its settings are no longer valid."""
+    from hifumotion.experiment import TwinConfig
+
+    try:
+        if not (folder / "truth" / "motion.json").is_file():
+            return None
+        config = json.loads((folder / "truth" / "parameters.json").read_text())["config"]
+        return json.loads(TwinConfig(**config).model_dump_json())
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 if __name__ == "__main__":
