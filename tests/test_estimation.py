@@ -675,7 +675,7 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     cli = [sys.executable, "-m", "hifumotion"]
     out = subprocess.run(cli + ["calibrate", str(folder / "observed"), "-o", str(cal), "--particles", "300",
                                 "--search-particles", "150", "--workers", "2", "--max-evaluations", "2",
-                                "--set", "resolution_check=true"],
+                                "--set", "resolution_check=true", "--set", "bloom_continuation=true"],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr + out.stdout
     params = json.loads((cal / "parameters.json").read_text())
@@ -686,6 +686,8 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     for name in ("youngs_modulus_pa", "poisson_ratio", "beta1_pa_s_pow", "beta2", "external_force_n"):
         assert "value" in params["parameters"][name] and "determined" in params["parameters"][name]
     assert params["fit"]["runs"] > 5 and (cal / "search_log.jsonl").is_file()
+    # the observation as it was made: frame 0's target continued into the bar's bloom, as asked
+    assert params["observation"]["bloom_continuation"] is True
     assert (cal / "model" / "scene.toml").is_file() and (cal / "observation" / "tissue.vtp").is_file()
     # the model kept is the one that fits the training frames better, saved with its own parameters
     mapping, model = params["fit"]["strategy"], params["model"]

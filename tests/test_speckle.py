@@ -483,8 +483,11 @@ def test_frame_zeros_target_reaches_the_bar_it_is_pressed_on():
     echo = 0.05 + truth * rng.rayleigh(0.45, truth.shape) + 1.5 * bar
     image = np.clip(ndimage.gaussian_filter(echo, (1.0, 2.0)), 0, 1).astype(np.float32)
     rough = ndimage.binary_erosion(truth, iterations=4)
-    got = segment_target(image, rough, 0.2, solids=Solids(np.zeros_like(bar), bar))
+    cut = segment_target(image, rough, 0.2, solids=Solids(np.zeros_like(bar), bar))
+    assert cut.bloom_continued_px == 0          # off unless asked for
+    got = segment_target(image, rough, 0.2, solids=Solids(np.zeros_like(bar), bar), continue_bloom=True)
     assert got.bloom_px[1] > 0 and got.bloom_continued_px > 0
+    np.testing.assert_array_equal(got.mask & ~cut.mask, got.mask ^ cut.mask)    # it only adds
     band = bloom_mask(bar, got.bloom_px) & ~bar
     hidden = truth & band
     assert (got.mask & hidden).sum() >= 0.8 * hidden.sum()

@@ -229,8 +229,11 @@ def online(
     with output_folder(output, overwrite, inputs=(calibration_dir, observed_dir)) as out:
         with StageBars() as progress:
             with record.stage("reduced model, frame 0"):
+                # frame 0 segmented as the calibration's tracking segmented it
+                continued = bool((meta.get("observation") or {}).get("bloom_continuation", False))
                 session = OnlineSession.start(spec, k, setup, frame0, initial, ahead,
-                                              boundary_offset_mm=boundary_offset, progress=progress)
+                                              boundary_offset_mm=boundary_offset, continue_bloom=continued,
+                                              progress=progress)
             with record.stage("online"):
                 due = time.perf_counter()
                 for frame in frames:

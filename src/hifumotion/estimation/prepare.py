@@ -64,6 +64,9 @@ class Observation:
     bar_cap
         What the continuation of the top under the resting bar did
         (:class:`~hifumotion.observed.bar_cap.BarCap`); ``None`` when it was not asked for.
+    bloom_continuation
+        Whether frame 0's target was given the strip the bar's bloom hides (:func:`prepare`'s
+        ``continue_bloom``); the online loop segments frame 0 the same way.
     """
 
     observed: Observed
@@ -75,6 +78,7 @@ class Observation:
     timings_s: dict = field(default_factory=dict)
     motion: object | None = None
     bar_cap: object | None = None
+    bloom_continuation: bool = False
 
     @property
     def pixel_mm(self) -> float:
@@ -171,7 +175,7 @@ def _fill_bar_cap(masks: np.ndarray, observed: Observed, boundary_offset_mm: flo
 
 def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
             progress: Progress | None = None, boundary_offset_mm: float = 0.0,
-            tracking: str = "speckle", fill_bar_cap: bool = True) -> Observation:
+            tracking: str = "speckle", fill_bar_cap: bool = True, continue_bloom: bool = False) -> Observation:
     """Segment, reconstruct and track an observed experiment (module docstring).
 
     ``boundary_offset_mm``: how far outside the true boundary the imaging system's
@@ -183,6 +187,9 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     ``fill_bar_cap``: continue the sweep's top into the band around the resting bar that its
     segmentation had to leave out (:func:`~hifumotion.observed.bar_cap.fill_under_bar`), so the
     reconstructed tissue touches the bar as the real one does.
+
+    ``continue_bloom``: with speckle tracking, give frame 0's target the strip the bar's bloom
+    hides where tissue is seen at its edge (:func:`~hifumotion.speckle.segment_target`).
     """
     from hifumotion.observed import shift_boundary
     from hifumotion.segmentation import track
@@ -232,7 +239,7 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
         from hifumotion.speckle import follow
 
         motion = follow(observed.frames.astype(np.float32) / 255.0, init, px, solids=frame_solids(observed),
-                        boundary_offset_mm=boundary_offset_mm, method=method)
+                        boundary_offset_mm=boundary_offset_mm, method=method, continue_bloom=continue_bloom)
         masks = motion.masks.copy()
     else:
         masks = track(observed.frames, init, method, spacing=px, exclude=known_solid_mask(observed.setup, z_frames)).masks
@@ -243,7 +250,8 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     source = str(contours_csv) if given else tracking
     tell("track frames", 1.0)
     timings["track_s"] = time.perf_counter() - t2
-    return Observation(observed, sweep, rec, offset, masks, source, timings, motion, cap)
+    return Observation(observed, sweep, rec, offset, masks, source, timings, motion, cap,
+                       continue_bloom and motion is not None)
 
 
 __all__ = ["Observation", "frame_solids", "known_solid_mask", "prepare", "read_user_contours"]

@@ -131,7 +131,8 @@ def region_leak(mask: np.ndarray, given: np.ndarray) -> float:
 
 
 def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Solids | None = None,
-                   boundary_offset_mm: float = 0.0, method: str = "glcv", **params: Any) -> TargetSegmentation:
+                   boundary_offset_mm: float = 0.0, method: str = "glcv", continue_bloom: bool = False,
+                   **params: Any) -> TargetSegmentation:
     """Segment the target on one frame with the known solids taken out of the image.
 
     1. The tissue's and the background's grey levels are read inside and well outside the
@@ -144,10 +145,11 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
     3. The segmentation, less the solids, is moved inwards by ``boundary_offset_mm`` (the
        imaging system's, measured on a phantom) on its free boundary only: where it lies on a
        solid it is already where the solid's surface is.
-    4. The strip the bloom hid is given back where tissue is seen at the bloom's edge
-       (:func:`~hifumotion.observed.solids.continue_into_bloom`): tissue pressed by the bar
-       reaches the bar, and a section cut off at the bloom's edge would be biased away from
-       it in every frame it is carried to.
+    4. With ``continue_bloom``, the strip the bloom hid is given back where tissue is seen at
+       the bloom's edge (:func:`~hifumotion.observed.solids.continue_into_bloom`): tissue
+       pressed by the bar reaches the bar, and a section cut off at the bloom's edge is biased
+       away from it in every frame it is carried to (off by default: docs/decisions.md,
+       "Frame 0's target reaches the bar").
     5. A segmentation that leaves the given region (more than :data:`REGION_LEAK_FRACTION` of
        it beyond :data:`REGION_MARGIN` of the region's radius) is not the target drawn: the given
        region is kept instead, and ``given_region_kept`` says so.
@@ -183,7 +185,7 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
         pixel = float(np.mean(as_spacing_mm(spacing_mm)))
         mask = shift_boundary(mask | excluded, boundary_offset_mm, pixel) & ~excluded
     continued = 0
-    if mask.any() and max(bloom) > 0:
+    if continue_bloom and mask.any() and max(bloom) > 0:
         # the strip the bloom hid, where tissue is seen at the bloom's edge (it lies on the
         # bar, so the free boundary's offset does not apply to it)
         grown = continue_into_bloom(mask, solids.bar, bloom) & ~solid
@@ -231,7 +233,7 @@ def refine_in_band(image: np.ndarray, carried: np.ndarray, excluded: np.ndarray,
 def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = None,
            boundary_offset_mm: float = 0.0, method: str = "glcv", series: DisplacementSeries | None = None,
            point_step_px: float = 1.0, refine_iterations: int = 0, refine_band_px: int = 2,
-           progress: bool = False, **params: Any) -> FollowResult:
+           progress: bool = False, continue_bloom: bool = False, **params: Any) -> FollowResult:
     """Segment frame 0 and carry its contour through the cine loop by speckle tracking.
 
     Parameters
@@ -263,6 +265,9 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
         keeps the carried contour as it is.
     progress
         Show a progress bar.
+    continue_bloom
+        Give frame 0's target the strip the bar's bloom hides where tissue is seen at its edge
+        (:func:`segment_target`).
     """
     from hifumotion.observed.solids import bloom_mask
     from hifumotion.sequence import ImageSequence
@@ -275,7 +280,7 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
     shape = frames.shape[1:]
     t0 = time.perf_counter()
     first = segment_target(frames[0], init, spacing_mm, solids=solids, boundary_offset_mm=boundary_offset_mm,
-                           method=method, **params)
+                           method=method, continue_bloom=continue_bloom, **params)
     contour0 = Contour.from_mask(first.mask, spacing_mm)
     points0 = contour0.resampled(point_step_px).points_px
     first_s = time.perf_counter() - t0

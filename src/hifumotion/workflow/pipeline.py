@@ -57,6 +57,7 @@ class EstimationConfig(CalibrationSettings):
         "speckle", description="how the time series is observed: frame 0's contour carried by speckle tracking, or GLCV re-segmenting every frame (the paper)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
+    bloom_continuation: bool = Field(False, description="speckle tracking: give frame 0's target the strip the bar's bloom hides where tissue is seen at the bloom's edge (tissue pressed by the bar reaches it); off by default: it removes the tracked section's bias towards the side away from the bar, and the force-held pushes' fits on those sections validate worse (docs/decisions.md, \"Frame 0's target reaches the bar\")")
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
     prediction_band: bool = Field(True, description="also predict the aim one standard error either way along the direction the training frames fix least (two more runs of the model): aim.csv's band_mm, prediction.json's band, the report")
     @field_validator("horizons_frames")
@@ -131,7 +132,7 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
         shutil.copyfile(resume_log, log)
     with stage("observe: segment sweep, reconstruct, track"):
         observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm,
-                              tracking=s.tracking)
+                              tracking=s.tracking, continue_bloom=s.bloom_continuation)
     with stage("calibrate"):
         # the pipeline's training frames, parsed once for the series (EstimationConfig is a
         # CalibrationSettings: every other setting passes as it is)
