@@ -1,6 +1,6 @@
 """Make the twin that ships with the package (``src/hifumotion/data/demo_twin``) again.
 
-It is the output of ``hifumotion experiment --preset push_change --seed 0``, less the truth's
+It is the output of ``hifumotion experiment --preset slide_reverse --seed 0``, less the truth's
 bulky records that no run reads (the finite elements' VTU files, the trajectory, the contour
 tables): ``observed/`` whole; ``truth/`` with the true sections of every frame and sweep plane
 (PNG and NIfTI), ``parameters.json``, ``motion.json``, ``bar_pose.csv`` and the re-runnable scene;

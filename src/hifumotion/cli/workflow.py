@@ -19,7 +19,7 @@ from hifumotion.errors import InputError
 @app.command()
 def demo(
     output: Path = typer.Option(Path("demo-output"), "--output", "-o", help="New output folder."),
-    preset: str = typer.Option("push_change", "--preset", help="Synthetic experiment: push_change (the demo's resolution, the push raised unannounced after the training frames; the package ships it at seed 0, any other preset or seed is generated: minutes), slow_push (the force rising all along), demo (the paper's ramp-and-hold push), paper, push_release, oblique, small (seconds), default (the paper's resolution; long)."),
+    preset: Optional[str] = typer.Option(None, "--preset", help="Synthetic experiment (default: the twin the package ships, slide_reverse at seed 0: a tilted bar driven in, drawn back and driven on, which friction and contact make no linear image of the drive). Any other preset or seed is generated (minutes): push_change (the push raised unannounced after the training frames), slow_push (the force rising all along), demo (the paper's ramp-and-hold push), paper, push_release, oblique, slide, drive_release, small (seconds), default (the paper's resolution; long)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of the synthetic experiment."),
     dataset: Optional[Path] = typer.Option(None, "--dataset", help="Real images with expert masks (images/, masks/, init.json); default ../shared/data/ddti."),
     images: int = typer.Option(6, "--images", min=1, help="How many images of the dataset to segment."),
@@ -36,6 +36,7 @@ def demo(
     from hifumotion.run_info import RunRecord
     from hifumotion.workflow.demo import DemoSettings, run_demo
 
+    preset = DemoSettings.preset if preset is None else preset
     if preset not in PRESETS:
         raise InputError(f"unknown preset; choose from {', '.join(PRESETS)}", "--preset")
     if dataset is not None:

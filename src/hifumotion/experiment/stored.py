@@ -21,7 +21,7 @@ from hifumotion.experiment.config import TwinConfig
 from hifumotion.observed import Observed
 
 #: the preset and seed of the twin that ships with the package
-BUNDLED_PRESET, BUNDLED_SEED = "push_change", 0
+BUNDLED_PRESET, BUNDLED_SEED = "slide_reverse", 0
 
 
 @dataclass

@@ -4,7 +4,7 @@ One documented order (each step's folder inside the output):
 
 1. ``experiment/`` — the synthetic experiment: the sweep, the time series, the clicked contour
    (``observed/``) and the truth (``truth/``). The twin that ships with the package
-   (:func:`~hifumotion.experiment.stored.bundled_twin`: preset ``push_change``, seed 0) is copied
+   (:func:`~hifumotion.experiment.stored.bundled_twin`: preset ``slide_reverse``, seed 0) is copied
    there; another preset or seed, or ``regenerate``, makes one afresh
    (:func:`~hifumotion.experiment.generate_twin`: its finite-element truth takes minutes);
 2. ``segmentation/`` — the paper's comparison of the six level-set methods (Table 2, Figures
@@ -27,6 +27,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.console import log
+from hifumotion.experiment.stored import BUNDLED_PRESET
 from hifumotion.workflow.pipeline import EstimationConfig, outcome_summary, run_pipeline
 
 Progress = Callable[[str, float], None]
@@ -94,7 +95,7 @@ def sweep_dataset(twin, folder: str | Path, planes: int = 4, clicks: int = 8, er
 class DemoSettings:
     """What ``hifumotion demo`` runs (every field has a default)."""
 
-    preset: str = "push_change"              # twin preset: the push changed unannounced after the training frames, at the demo's resolution (the package ships it at seed 0); small (tests), default (the paper's size)
+    preset: str = BUNDLED_PRESET             # twin preset: the twin the package ships (a drive that reverses, at the demo's resolution, seed 0); small (tests), default (the paper's size)
     seed: int = 0
     dataset: Path | None = None              # real images with expert masks; default ../shared/data/ddti
     dataset_images: int = 6
