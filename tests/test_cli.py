@@ -164,6 +164,23 @@ def test_reconstruct_command_from_a_folder_of_masks(tmp_path):
     assert_one_line_error(run("reconstruct", str(masks_dir), "-o", str(tmp_path / "x")), "--slice-spacing")
 
 
+def test_reconstruct_reads_a_label_map_of_zeros_and_ones(tmp_path):
+    """The same ellipsoid as a 0/1 label map in NIfTI, written as the twin writes its true sweep
+    (``truth/sweep.nii.gz``): read as the mask it is, not as a picture whose 1 is nearly black."""
+    from hifumotion.io.writers import write_masks_nifti
+
+    rows, cols = np.mgrid[0:80, 0:90]
+    zs = np.arange(-5.5, 6.0, 1.0)
+    x, y = cols * 0.2 - 9.0, rows * 0.2 - 8.0
+    labels = np.stack([(x / 7.0) ** 2 + (y / 5.5) ** 2 <= 1 - (z / 6.0) ** 2 for z in zs])
+    write_masks_nifti(tmp_path / "sweep.nii.gz", labels, (0.2, 0.2), slice_positions_mm=zs)
+    out = tmp_path / "rec"
+    proc = run("-q", "reconstruct", str(tmp_path / "sweep.nii.gz"), "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "reconstruction.json").read_text())
+    assert summary["volume_mm3"] == pytest.approx(4 / 3 * np.pi * 7 * 5.5 * 6, rel=0.03)
+
+
 def test_track_follows_the_twins_target_and_writes_its_fields(small_twin, tmp_path):
     """``hifumotion track`` on the small twin's observed folder: every file of the layout,
     the masks on the cine's grid, and contours that stay on the true section."""

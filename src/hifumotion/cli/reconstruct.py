@@ -41,7 +41,9 @@ def reconstruct(
     check_binary(seq.frames, sweep)
     if not seq.spacing_known and spacing is None:
         log.warning("%s carries no pixel size; using 1 mm (give --spacing)", sweep)
-    masks = seq.frames > 0.5
+    # a mask: 0 and one other value (checked above), whatever that value is — 1 in a label map
+    # (hifumotion's own truth/sweep.nii.gz), 255 in a PNG
+    masks = seq.frames > 0
     record = RunRecord("reconstruct", config={"sweep": str(sweep), "spacing_mm": list(seq.spacing_mm),
                                               "slice_positions_mm": [float(p) for p in positions],
                                               "voxel_mm": voxel, "particle_spacing_mm": particle_spacing})
