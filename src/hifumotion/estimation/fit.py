@@ -129,19 +129,21 @@ class Uncertainty:
     determined: dict                # coordinate -> bool
 
 
-def uncertainty(ev: Evaluator, theta: np.ndarray, residuals_mm: np.ndarray | None = None) -> Uncertainty:
+def uncertainty(ev: Evaluator, theta: np.ndarray, residuals_mm: np.ndarray | None = None,
+                jacobian_mm: np.ndarray | None = None) -> Uncertainty:
     """Gauss–Newton covariance ``s² (JᵀJ)⁻¹`` at ``theta``.
 
     ``s`` is the residual scatter per point, but at least half a pixel: no contour is
     known better, and a perfect fit must not make every coordinate look determined. The
     scatter is ``residuals_mm``' (mm, ``(n, M)``: another model's at ``theta``, such as the full
     model's where a reduced one gives the Jacobian) or, by default, ``ev``'s own at ``theta``.
+    ``jacobian_mm``: the Jacobian at ``theta`` where the caller has it (:func:`jacobian`'s).
     Directions the Jacobian does not see (singular values below 10⁻⁸ of the largest)
     give the coordinates along them an infinite error. The contour points' errors are
     correlated along the contour, so these standard errors are lower bounds. A
     coordinate is *determined* when its standard error is below its relevance scale
     (20 % for ln E, ln β1 and ln μ_f, 0.05 for ν, 0.2 for β2)."""
-    j = jacobian(ev, theta)
+    j = jacobian(ev, theta) if jacobian_mm is None else np.asarray(jacobian_mm, float)
     r = (ev.one(theta) if residuals_mm is None else np.asarray(residuals_mm, float)).ravel()
     m, p = j.shape
     s2 = max(float(r @ r) / max(m - p, 1), (0.5 * ev.data.pixel_mm) ** 2)

@@ -183,8 +183,9 @@ def assess(ev: Evaluator, theta: np.ndarray, s: CalibrationSettings,
     """The :class:`Assessment` at ``theta`` on ``ev``'s model; ``residuals_mm``: the scatter to
     use instead of the model's own (the full model's at the fit, where a reduced one gives the
     Jacobian)."""
-    unc = fitting.uncertainty(ev, theta, residuals_mm)
-    return Assessment(unc, fitting.jacobian(ev, theta), fitting.degeneracy(ev, theta) if s.degeneracy_check else [])
+    j = fitting.jacobian(ev, theta)
+    unc = fitting.uncertainty(ev, theta, residuals_mm, jacobian_mm=j)
+    return Assessment(unc, j, fitting.degeneracy(ev, theta) if s.degeneracy_check else [])
 
 
 @dataclass
