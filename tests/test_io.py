@@ -131,6 +131,25 @@ def test_rgb_tiff_becomes_grey(tmp_path):
     assert seq.n_frames == 1 and np.array_equal(np.rint(seq.frames[0] * 255).astype(np.uint8), grey)
 
 
+def test_a_tiff_written_page_by_page_keeps_every_page(tmp_path):
+    # each page written alone is its own series in tifffile; the second must not be dropped
+    pages = [np.full((6, 7), 10 * (k + 1), np.uint8) for k in range(3)]
+    with tifffile.TiffWriter(tmp_path / "pages.tif") as w:
+        for page in pages:
+            w.write(page)
+    seq = read_sequence(tmp_path / "pages.tif")
+    assert seq.n_frames == 3
+    assert np.all(np.diff(seq.frames[:, 0, 0]) > 0)       # in the order written
+
+
+def test_a_tiff_with_pages_of_two_sizes_is_refused_by_name(tmp_path):
+    with tifffile.TiffWriter(tmp_path / "mixed.tif") as w:
+        w.write(np.zeros((6, 7), np.uint8))
+        w.write(np.zeros((3, 7), np.uint8))
+    with pytest.raises(InputError, match=r"mixed\.tif.*different sizes"):
+        read_sequence(tmp_path / "mixed.tif")
+
+
 # --- DICOM ----------------------------------------------------------------------------------
 
 

@@ -21,16 +21,28 @@ def _read_tiff(path: Path) -> np.ndarray:
     """Frames ``(T, H, W)`` of a (multi-page) TIFF, using tifffile's axis labels.
 
     ``S`` is the colour-sample axis (turned into grey), ``Y``/``X`` the image
-    plane; every other axis (pages, time, depth …) is flattened into frames.
+    plane; every other axis (pages, time, depth …) is flattened into frames. A file
+    whose pages were written one by one holds one series per page: every series is
+    read, in order, and they must share one image size (a page of another size is no
+    frame of the same cine, and dropping it silently would lose the user's data).
     """
     with tifffile.TiffFile(path) as tif:
-        series = tif.series[0]
-        data, axes = series.asarray(), series.axes
+        series = [(s.asarray(), s.axes) for s in tif.series]
+    frames = [_tiff_frames(data, axes, path) for data, axes in series]
+    shapes = sorted({f.shape[-2:] for f in frames})
+    if len(shapes) > 1:
+        raise InputError(f"its {len(frames)} image series have different sizes "
+                         f"({', '.join(f'{h}×{w}' for h, w in shapes)} px); expected frames of one size", path)
+    return np.concatenate(frames) if len(frames) > 1 else frames[0]
+
+
+def _tiff_frames(data: np.ndarray, axes: str, path: Path) -> np.ndarray:
+    """One TIFF series as grey frames ``(T, H, W)``."""
     if "S" in axes:
         data = to_grey(np.moveaxis(data, axes.index("S"), -1), True)
         axes = axes.replace("S", "")
     if not axes.endswith("YX"):
-        raise InputError(f"unexpected TIFF axes {series.axes!r}", path)
+        raise InputError(f"unexpected TIFF axes {axes!r}", path)
     return data.reshape((-1,) + data.shape[-2:])
 
 
