@@ -212,6 +212,7 @@ def targets(protocol: str, r: dict) -> dict:
         "online_at_frame_rate": r["online_ms_per_frame"] <= r["frame_interval_ms"],
     }
     t.update(surrogate_targets(r))
+    t[f"no_determined_fit_beyond_{CONFIDENT_SIGMAS:.0f}_sigma"] = not confidently_wrong(rec)
     if protocol in ("slow_push", "push_release"):
         best = min(hold["centroid_mean_mm"], kal["centroid_mean_mm"])
         t["centroid<=half_of_hold_and_kalman"] = v["centroid_mean_mm"] <= 0.5 * best
@@ -229,6 +230,23 @@ def targets(protocol: str, r: dict) -> dict:
         t[f"poisson_within_{POISSON_ABS}"] = abs(rec["poisson_ratio"]["fit"] - rec["poisson_ratio"]["truth"]) <= POISSON_ABS
         t[f"twin_moves>={WINDOW_MOTION_MM}mm_in_validation"] = r["validation_window_motion_mm"] >= WINDOW_MOTION_MM
     return t
+
+
+#: a fit reported as determined may lie this many of its own standard errors from the truth
+CONFIDENT_SIGMAS = 3.0
+
+
+def confidently_wrong(recovered: dict) -> list[str]:
+    """The recovered parameters (:func:`~hifumotion.estimation.calibrate.recovered_parameters`)
+    reported as determined that lie more than :data:`CONFIDENT_SIGMAS` of their own standard
+    errors from the truth, each as ``name: z σ``."""
+    out = []
+    for name, v in recovered.items():
+        if v["determined"] and v["std"]:
+            z = (v["fit"] - v["truth"]) / v["std"]
+            if abs(z) > CONFIDENT_SIGMAS:
+                out.append(f"{name}: {z:+.1f}σ")
+    return out
 
 
 #: how far ahead the online physics is measured against the online surrogate (ms)
@@ -342,6 +360,10 @@ def _tell(name: str, label: str, r: dict) -> None:
     peers = ", ".join(f"{m} {s['dsc_mean']:.4f}/{s['centroid_mean_mm']:.3f}"
                       for m, s in r["baselines_validation"].items() if s.get("frames"))
     print(f"    peers (DSC/centroid mm): {peers}; {r['verdict']}", file=sys.stderr, flush=True)
+    fits = ", ".join(f"{n} {v['fit']:.4g} (truth {v['truth']:.4g}, {'' if v['determined'] else 'un'}determined"
+                     + (f", {(v['fit'] - v['truth']) / v['std']:+.1f}σ)" if v["std"] else ")")
+                     for n, v in r["recovered"].items())
+    print(f"    fit: {fits}", file=sys.stderr, flush=True)
     c = r.get("choice")
     if c and "chosen" in c:
         print(f"    choice: {c['sentence']}; on validation {c['chosen']} {c['validation'].get('centroid_mean_mm', float('nan')):.3f} mm, "

@@ -41,7 +41,7 @@ from hifumotion.estimation.protocol import default_frames, parse_frames
 from hifumotion.estimation.resolution import resolution_check
 from hifumotion.estimation.settings import CalibrationSettings
 from hifumotion.estimation.space import FRICTION_BOUNDS, FRICTION_NAME, SearchSpace
-from hifumotion.estimation.strategies import SearchJob, SearchRecord, strategy_for
+from hifumotion.estimation.strategies import Assessment, SearchJob, SearchRecord, strategy_for
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +70,7 @@ class Calibration:
     objective: str = "contour"      # what was fitted (CalibrationSettings.objective resolved)
     summary: dict | None = None     # parameters.json, once written
     resolution: dict | None = None  # the fit on twice the particles (CalibrationSettings.resolution_check)
+    assessment: Assessment | None = None   # the Jacobian and residuals the uncertainty came from
 
     def caveats(self) -> list[str]:
         """Why the fit's uncertainties are not to be read as those of a converged fit: the search
@@ -193,7 +194,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), outcome.fit,
                        outcome.table1, outcome.record, outcome.assessment.degeneracy,
                        unc.correlation.round(3).tolist(), outcome.model, search, observation, ev.runs, timings,
-                       ev.failed, objective, resolution=resolution)
+                       ev.failed, objective, resolution=resolution, assessment=outcome.assessment)
 
 
 def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:

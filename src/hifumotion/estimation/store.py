@@ -121,10 +121,15 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
             "degeneracy": cal.degeneracy,
             "resolution_check": cal.resolution,
             # the fit's coordinates (estimation.space), their standard errors (null: no data bound
-            # it) and correlations: the Gauss–Newton covariance the prediction's band is made from
+            # it) and correlations: the covariance the prediction's band is made from — the larger,
+            # coordinate by coordinate, of the independent-point one and the frames' jackknife
+            # (estimation.fit.uncertainty), both beside it
             "correlation": {"coordinates": list(cal.std),
-                            "std": [float(v) if np.isfinite(v) else None for v in cal.std.values()],
-                            "matrix": cal.correlation},
+                            "std": _finite_or_none(cal.std.values()),
+                            "matrix": cal.correlation,
+                            **({} if cal.assessment is None else {
+                                "std_independent_points": _finite_or_none(cal.assessment.uncertainty.std_independent),
+                                "std_frames_jackknife": _finite_or_none(cal.assessment.uncertainty.std_frames)})},
             "runs": cal.runs,
             "failed_runs": cal.failed_runs,
             "converged": cal.search.converged if cal.search is not None else None,
@@ -192,6 +197,11 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
         raise InputError(f"unreadable frame-0 reference ({' '.join(str(exc).split())[:160]}); expected the npz "
                          "hifumotion calibrate writes (plane_*, pixel_mm, frame0_mask, rec_*)", ref_path) from None
     return spec, k, ref, meta
+
+
+def _finite_or_none(values) -> list:
+    """Standard errors as JSON: ``null`` where no data bound one (infinite)."""
+    return [float(v) if np.isfinite(v) else None for v in values]
 
 
 def _check_series(meta: dict, interval_s: float, path: Path) -> None:

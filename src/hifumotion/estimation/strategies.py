@@ -170,12 +170,14 @@ SearchRecord = SpaceMappingRecord | TrustRegionRecord
 
 @dataclass
 class Assessment:
-    """The fit's uncertainty (:func:`~.fit.uncertainty`), its Jacobian and, where asked, the
-    F–E–β1 scaling's costs (:func:`~.fit.degeneracy`), all on the model the fit was made on."""
+    """The fit's uncertainty (:func:`~.fit.uncertainty`), its Jacobian (mm per coordinate), the
+    residuals (mm, ``(n, M)``) whose scatter it used and, where asked, the F–E–β1 scaling's
+    costs (:func:`~.fit.degeneracy`), all on the model the fit was made on."""
 
     uncertainty: fitting.Uncertainty
     jacobian: np.ndarray
     degeneracy: list
+    residuals_mm: np.ndarray
 
 
 def assess(ev: Evaluator, theta: np.ndarray, s: CalibrationSettings,
@@ -184,8 +186,9 @@ def assess(ev: Evaluator, theta: np.ndarray, s: CalibrationSettings,
     use instead of the model's own (the full model's at the fit, where a reduced one gives the
     Jacobian)."""
     j = fitting.jacobian(ev, theta)
-    unc = fitting.uncertainty(ev, theta, residuals_mm, jacobian_mm=j)
-    return Assessment(unc, j, fitting.degeneracy(ev, theta) if s.degeneracy_check else [])
+    r = ev.one(theta) if residuals_mm is None else np.asarray(residuals_mm, float)
+    unc = fitting.uncertainty(ev, theta, r, jacobian_mm=j)
+    return Assessment(unc, j, fitting.degeneracy(ev, theta) if s.degeneracy_check else [], r)
 
 
 @dataclass
@@ -257,7 +260,7 @@ class SpaceMapping:
     The mapping (where the final model is finer and ``space_mapping``): a run of the final
     model at the current point; the difference of its residuals from the search model's is
     taken as fixed, and a Gauss–Newton step with the search model's Jacobian (only in the
-    coordinates the data determine, at most :data:`MAX_MAPPING_STEP` step units a coordinate)
+    coordinates it sees sharply, :attr:`~.fit.Uncertainty.sharp`, at most :data:`MAX_MAPPING_STEP` step units a coordinate)
     moves the point; ``mapping_runs`` times at most, stopping when a step makes the final model
     fit worse. The best point the final model was run at is kept — or the search model, where it
     fits the training frames better (``keep_better_model``)."""
@@ -285,7 +288,7 @@ class SpaceMapping:
     def _map(job: SearchJob, theta: np.ndarray, assessment: Assessment, record: SpaceMappingRecord):
         ev, s, space = job.ev, job.settings, job.space
         r_search = ev.one(theta)
-        free = np.array([assessment.uncertainty.determined[n] for n in space.names])
+        free = np.array([assessment.uncertainty.sharp[n] for n in space.names])
         limit = MAX_MAPPING_STEP * space.steps * 10
         j = assessment.jacobian
         tried = []

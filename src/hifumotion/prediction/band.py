@@ -4,7 +4,7 @@ direction the training frames fix least.
 A push seen over a few seconds leaves some directions of the parameters nearly undetermined —
 typically E against ν, and β1 against β2 (the creep's scale against its exponent), each pair
 correlated beyond 0.95. A prediction from the best fit alone says nothing of them. The band is a
-Laplace approximation cut to its widest direction: the calibration's Gauss–Newton covariance
+Laplace approximation cut to its widest direction: the calibration's covariance
 (:func:`~hifumotion.estimation.fit.uncertainty`: standard errors and correlations of the
 coordinates ln E, ν, ln β1, β2 [, ln μ_f]) is taken in units of each coordinate's relevance
 (:data:`~hifumotion.estimation.fit.RELEVANCE`, the scale below which a coordinate counts as
