@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tomllib
+from pathlib import Path
 
 import pytest
 
@@ -176,3 +177,21 @@ def test_driven_protocols_drive_the_bar_and_force_protocols_refuse_a_driven_one(
         twin_config("slide_reverse", {"protocol": {"reverse_at_mm": 1.0}})   # not beyond what is drawn back
     with pytest.raises(InputError, match="protocol.ramp_s"):
         twin_config("slide_reverse", {"protocol": {"ramp_s": 8.0}})          # the drawing back past 90 %
+
+
+def test_every_section_the_code_and_readme_cite_in_the_decisions_exists():
+    """Each pointer into the decision record (its file name, a comma, a heading in quotes) in the
+    package, the benchmarks, the tests or the README names one of its headings (or a prefix of
+    one, as the sources shorten them)."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    headings = [line[3:].strip() for line in (root / "docs" / "decisions.md").read_text().splitlines()
+                if line.startswith("## ")]
+    sources = [root / "README.md", *(root / "src").rglob("*.py"), *(root / "benchmarks").glob("*.py"),
+               *(root / "tests").glob("*.py")]
+    cited = {(p.name, m) for p in sources
+             for m in re.findall(r'decisions\.md,\s*"([^"]+)"', " ".join(p.read_text().split()))}
+    assert cited, "no citation found: the pattern no longer matches how the sources cite"
+    missing = sorted((name, m) for name, m in cited if not any(h.startswith(m) for h in headings))
+    assert not missing, missing

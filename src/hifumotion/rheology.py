@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 #: Floor of the shear rate in μ (1/s): a regularisation, not fitted. 0.02 1/s is a strain of
-#: 2 % over a second, below the creep rates of a push (docs/decisions.md, "Eq. 16 in one place").
+#: 2 % over a second, below the creep rates of a push (docs/decisions.md, "One protocol for the three integrators").
 RATE_FLOOR_PER_S = 0.02
 
 #: Cap of μ (Pa·s).

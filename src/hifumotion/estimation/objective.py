@@ -19,14 +19,14 @@ objective can then add, for each point a and training frame t, the in-plane diff
 that a contour alone cannot give (:meth:`TrainingData.with_displacement`). Since the model's
 points A follow the material (:func:`~hifumotion.particles.section.material_displacement`),
 as the tracked ones do, this is the default wherever speckle tracking observed the motion
-(``CalibrationSettings.objective = "auto"``; docs/decisions.md, "Issue 19, seventh part").
+(``CalibrationSettings.objective = "auto"``; docs/decisions.md, "The points A follow the material; the floor re-measured; the displacement fitted").
 
 The contour residuals themselves can be weighted by the same quality
 (:meth:`TrainingData.with_contour_weights`, ``quality_weights``; on by default since the
-top under the bar is continued and the bar's travel fitted, docs/decisions.md, "Issue 19,
-third part"): a point whose speckle the image does not show — under the bar's blur, on the floor —
+top under the bar is continued and the bar's travel fitted, docs/decisions.md, "The top under
+the bar, the bar's travel"): a point whose speckle the image does not show — under the bar's blur, on the floor —
 was carried by a displacement filled in from its neighbours, and so was the observed
-boundary there (docs/decisions.md, "Issue 19, second part").
+boundary there (docs/decisions.md, "The benchmark on four twins: what limits the fit, quality weights").
 
 The bar is observed too: its echo is a large rigid body the speckle tracker follows to a few
 per cent (:attr:`~hifumotion.speckle.DisplacementSeries.rigid_shift_mm`), and under a
@@ -34,7 +34,7 @@ force-controlled push its travel is what F/E sets most directly. With
 :meth:`TrainingData.with_bar` the objective adds, per training frame, the in-plane difference
 (mm, x and y) of the model's bar displacement and the tracked one, weighted by √M (M points A):
 the bar's shift is estimated from its whole echo, so it counts as much as the whole contour
-(docs/decisions.md, "Issue 19, third part").
+(docs/decisions.md, "The top under the bar, the bar's travel, quality weights on").
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ name           estimator                                               library
 =============  ======================================================  ===========================
 
 ``farneback`` is the default, chosen by measurement (``benchmarks/bench_observation.py``;
-docs/decisions.md, "Speckle tracking").
+docs/decisions.md, "Seeing the motion: speckle tracking").
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def farneback_flow(levels: int = 0, window_px: int = 15, iterations: int = 1) ->
     The tracker always starts it from the previous frame's estimate, within a pixel or two
     of the answer, so by default it runs on the full-resolution images only: coarser
     levels of a speckle image are mostly noise, and starting there made the field worse
-    (docs/decisions.md, "Speckle tracking").
+    (docs/decisions.md, "Seeing the motion: speckle tracking").
     """
     import cv2
 

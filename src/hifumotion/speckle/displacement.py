@@ -542,7 +542,7 @@ def displacement(frames: np.ndarray, spacing_mm=None, *, exclude: np.ndarray | N
         both carry NaN displacement and quality 0 in the result.
     estimator
         The optical flow (:data:`hifumotion.speckle._flow.ESTIMATORS`); ``farneback`` by
-        default (docs/decisions.md, "Speckle tracking").
+        default (docs/decisions.md, "Seeing the motion: speckle tracking").
     smoothing
         Width of the quality-weighted smoothing in speckle sizes (σ = ``smoothing`` × the
         speckle's FWHM / 2.355 on each axis); 0 for none (occluded pixels are then left as
