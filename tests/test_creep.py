@@ -365,7 +365,7 @@ def test_a_tilted_bar_drives_a_stiff_block_along_a_rough_floor_as_a_rigid_wedge(
 
 
 def test_the_blockwise_reduction_is_the_sparse_product():
-    """The reduced matrix built node block by node block (creep/reduce.py) against Tᵀ A T by
+    """The reduced matrix built node block by node block (creep/eliminate.py) against Tᵀ A T by
     SciPy's sparse products, for free nodes, sliding contacts on a floor and a tilted bar
     (turned frames, the bar's column) and bonded ones (zero columns)."""
     from hifumotion.creep.contact import STICK
@@ -401,10 +401,10 @@ def test_the_blockwise_reduction_is_the_sparse_product():
 
 
 def test_the_reduced_shear_rates_are_the_meshs_own():
-    # the rates the hyper-reduction reads straight from q̇ (creep/hyper.py) against the mesh's
+    # the rates the hyper-reduction reads straight from q̇ (reduced/hyper.py) against the mesh's
     # kernel on the node velocities, for random modes on a block with a displaced (distorted) corner
     from hifumotion.creep.hexahedra import MeshMatrices
-    from hifumotion.creep.hyper import rate_modes, shear_rates
+    from hifumotion.reduced.hyper import rate_modes, shear_rates
 
     mesh = voxel_mesh(block(3), 1.0)
     nodes = mesh.nodes_mm * MM
@@ -430,12 +430,12 @@ def _least_distance_problem(seed, rows=160, r=12):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_nnls_started_anywhere_reaches_the_optimum_scipys_finds(seed):
-    # Lawson & Hanson from a guessed passive set (creep/nnls.py) against SciPy's cold NNLS on the
+    # Lawson & Hanson from a guessed passive set (reduced/nnls.py) against SciPy's cold NNLS on the
     # least-distance problems the reduced contacts make: the same residual, and the optimality
     # conditions (w ≥ 0, gradient ≤ 0 where w = 0 and ≈ 0 where w > 0)
     from scipy.optimize import nnls
 
-    from hifumotion.creep.nnls import nnls_from
+    from hifumotion.reduced.nnls import nnls_from
 
     g, h = _least_distance_problem(seed)
     e = np.vstack([g.T, h[None]])
@@ -460,7 +460,7 @@ def test_the_contact_solves_response_is_its_derivative():
     # ReducedCreep.solve_response against the contact solve's own finite differences: random
     # stiffness, contact rows that press, right-hand sides moved along random directions by
     # amounts too small to change which rows press
-    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings
+    from hifumotion.reduced.model import ReducedCreep, ReducedSettings
 
     g, h = _least_distance_problem(3, rows=80, r=10)
     rng = np.random.default_rng(7)
@@ -528,7 +528,7 @@ def test_a_bar_driven_at_a_steady_rate_takes_the_kelvin_voigt_force_in_full_and_
 
 
 def _reduced_of(solver, runs, **settings):
-    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
+    from hifumotion.reduced.model import ReducedCreep, ReducedSettings, pod_basis
 
     return ReducedCreep(solver, pod_basis(runs), ReducedSettings(**settings))
 
@@ -719,7 +719,7 @@ def test_nodes_that_stay_on_the_floor_and_the_bars_face_in_every_snapshot_are_he
     axial motion exactly the bar's advance (the full model's pressed contacts), the modes stay
     orthonormal and hold the snapshots as before, and the reduced block driven 3× the
     shorter snapshot's travel slides at the closed form's dx = dδ / sin θ."""
-    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, held_on_solids, pod_basis
+    from hifumotion.reduced.model import ReducedCreep, ReducedSettings, held_on_solids, pod_basis
 
     n, rho, g, e = 4, 1000.0, 9.81, 1e6
     theta = math.radians(35.0)
@@ -779,7 +779,7 @@ def test_the_bars_rows_bound_its_rounded_solids_distance_from_below_and_touch_it
     rounded rim), whose signed distance is a convex function of q (positions and the bar's
     advance are linear in q): the row's distance d(q̄) + G (q − q̄) equals the true distance at
     q̄ and lies below it everywhere else — so a row never lets a node into the bar."""
-    from hifumotion.creep.reduced_bar import ReducedBarRows
+    from hifumotion.reduced.bar_rows import ReducedBarRows
 
     mesh = voxel_mesh(block(4), 1.0)
     axis = np.array([math.sin(0.6), -math.cos(0.6), 0.0])
@@ -818,8 +818,9 @@ def test_a_tilted_bar_slides_a_reduced_ellipsoid_on_a_rough_floor_as_the_full_mo
     kinematics does, within 5 % of the slide, and keep every node out of the bar. (With the face
     a sharp disc whose row appeared under it, that tissue jumped the depth it was behind the face
     at any step size; the rate of that jump threw the sample 766 mm.)"""
-    from hifumotion.creep.reduced import ReducedSettings
-    from hifumotion.creep.scene import reduced_creep, scene_material, simulate_creep, tissue_mesh
+    from hifumotion.reduced.model import ReducedSettings
+    from hifumotion.creep.scene import scene_material, simulate_creep, tissue_mesh
+    from hifumotion.reduced.build import reduced_creep
     from hifumotion.particles.scene import Scene
 
     def scene(travel_mm):
@@ -949,7 +950,7 @@ def test_the_reduced_corotational_model_bends_a_cantilever_as_the_elastica_on_a_
     # shortening, solved here, on ECSW's sample of the voxels; the same modes small-strain give the
     # linear α/8 and no shortening
     from hifumotion.creep.integrate import CreepResult
-    from hifumotion.creep.reduced import ReducedCreep, pod_basis, step_counters
+    from hifumotion.reduced.model import ReducedCreep, pod_basis, step_counters
     from hifumotion.creep.settings import ReducedSettings
 
     length, height, width, rho, g = 0.08, 0.01, 0.006, 1000.0, 9.81
@@ -993,7 +994,7 @@ def test_the_reduced_corotational_force_on_every_voxel_is_the_full_force_project
     from scipy.spatial.transform import Rotation
 
     from hifumotion.creep.corotation import Corotation
-    from hifumotion.creep.reduced_corotation import ReducedCorotation
+    from hifumotion.reduced.corotated_force import ReducedCorotation
 
     mesh, x, matrices = _block_matrices()
     two_g, kappa = 3e3, 2e4
@@ -1016,8 +1017,8 @@ def test_the_reduced_corotational_force_on_every_voxel_is_the_full_force_project
     assert np.allclose(at.matrix, modes.T @ (k @ modes), rtol=1e-10, atol=1e-12 * np.abs(at.matrix).max())
     # the viscosity turned with its voxels: the full model's rates read in each voxel's frame, and its
     # R C_e Rᵀ projected (every voxel rated and sampled, weight 1)
-    from hifumotion.creep.hyper import rate_modes, shear_rates
-    from hifumotion.creep.reduced_corotation import TurnedViscosity
+    from hifumotion.reduced.hyper import rate_modes, shear_rates
+    from hifumotion.reduced.corotated_force import TurnedViscosity
 
     every = np.arange(len(mesh.elements))
     upper = np.triu_indices(modes.shape[1])
@@ -1038,7 +1039,7 @@ def test_the_reduced_corotational_force_on_every_voxel_is_the_full_force_project
     assert np.allclose(c, modes.T @ (c_full @ modes), rtol=1e-5, atol=1e-5 * np.abs(c).max())
     # the friction's candidates' elastic force along their normals: the full force at their nodes (a
     # node twice, against two solids)
-    from hifumotion.creep.reduced_corotation import CandidateForces
+    from hifumotion.reduced.corotated_force import CandidateForces
 
     nodes = np.array([0, 3, 7, 7, 12])
     normals = np.array([[0, 1, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, -1, 0]], float)
@@ -1125,7 +1126,7 @@ def test_a_block_pressed_by_a_quarter_takes_the_neo_hookean_stretches():
 
 
 def test_the_reduced_model_refuses_a_neo_hookean_solver_by_name():
-    from hifumotion.creep.reduced import ReducedCreep
+    from hifumotion.reduced.model import ReducedCreep
 
     solver = CreepSolver(voxel_mesh(block(3), 1.0), CreepMaterial(5e3, 0.45), Surroundings((0, -9.81, 0)),
                          [ContactPlane((0, 0, 0), (0, 1, 0))], None, CreepSettings(kinematics="neo_hooke"))

@@ -52,7 +52,7 @@ from hifumotion.creep.corotation import Corotation
 from hifumotion.creep.neo_hooke import NeoHooke
 from hifumotion.creep.hexahedra import MeshMatrices, _positions
 from hifumotion.creep.linear import Factor, FactorError, preconditioned_cg, refined_solve
-from hifumotion.creep.reduce import reduced_matrix_data
+from hifumotion.creep.eliminate import eliminated_matrix_data
 from hifumotion.creep.settings import CreepSettings
 from hifumotion.creep.voxels import VoxelMesh
 from hifumotion.errors import InputError
@@ -407,7 +407,7 @@ class CreepSolver:
             # Pᵢᵀ Aᵢⱼ Pⱼ block by block on A's own pattern (:mod:`.reduce`)
             # a driven bar's advance is given: its nodes do not couple to it
             coupled = np.zeros_like(self._bar_normal) if self._driven() else self._bar_normal
-            data = reduced_matrix_data(a.indptr, a.indices, a.data, self._columns, coupled,
+            data = eliminated_matrix_data(a.indptr, a.indices, a.data, self._columns, coupled,
                                        self.punch is not None)
             # a constrained unknown's row is the identity times its node's mean diagonal (q = 0
             # there): the scale it has when it is free, so that the factorisation of one contact

@@ -185,45 +185,4 @@ def snapshot_run(scene: Scene, mesh, tissue_volume_mm3: np.ndarray, creep: Creep
     return runs[0]
 
 
-def reduced_from_runs(scene: Scene, mesh, runs: list[CreepResult], settings=None,
-                      creep: CreepSettings | None = None):
-    """A :class:`~.reduced.ReducedCreep` of ``mesh`` whose modes are the motion of the full
-    ``runs`` (:func:`snapshot_run`; the first one's settled state is the model's), its
-    matrices those of ``scene``'s solver (``creep``, its settings)."""
-    from hifumotion.creep.reduced import ReducedCreep, ReducedSettings, pod_basis
-
-    settings = settings or ReducedSettings()
-    solver, _ = creep_solver(scene, mesh, creep)
-    return ReducedCreep(solver, pod_basis(runs, settings.energy, settings.max_modes), settings)
-
-
-def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, settings=None,
-                  progress: Callable[[float], None] | None = None, creep: CreepSettings | None = None):
-    """A :class:`~.reduced.ReducedCreep` of the voxel mesh ``mesh`` whose modes are the motion of
-    full runs of ``scenes`` (the same tissue; other materials, forces; ``creep``, their settings),
-    run one after the other here: its construction."""
-    runs = []
-    for i, scene in enumerate(scenes):
-        tell = None if progress is None else (lambda f, i=i: progress((i + f) / len(scenes)))
-        runs.append(snapshot_run(scene, mesh, tissue_volume_mm3, creep, tell))
-    return reduced_from_runs(scenes[0], mesh, runs, settings, creep)
-
-
-def simulate_reduced(scene: Scene, reduced, tissue_volume_mm3: np.ndarray,
-                     progress: Callable[[float], None] | None = None, keep: list | None = None) -> SimulationResult:
-    """Run ``scene`` on the reduced model ``reduced`` (:func:`reduced_creep`, made for this
-    scene's tissue and mesh): its material, its bar's force schedule and its friction; the
-    result as :func:`simulate_creep`'s."""
-    mesh = reduced.mesh
-    punch, axis = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
-    force, breaks = (punch.force_n, punch.breakpoints_s) if punch is not None else ((lambda t: 0.0), ())
-    travel = punch.travel_m if punch is not None else None
-    result = reduced.run(scene_material(scene), force, breaks, output_times(scene), progress, nodes=keep is not None,
-                         travel_m=travel, friction=scene.physics.friction)
-    if keep is not None:
-        keep.append(result)
-    return simulation_result(scene, mesh, np.asarray(tissue_volume_mm3, float), result,
-                             bar_centres(scene, punch, axis, result), "reduced")
-
-
-__all__ = ["simulate_creep", "reduced_creep", "snapshot_run", "reduced_from_runs", "simulate_reduced", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]
+__all__ = ["simulate_creep", "snapshot_run", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]

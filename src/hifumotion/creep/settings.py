@@ -1,7 +1,7 @@
 """The forward models' numerical settings, as plain data (no solver imported).
 
 :class:`CreepSettings` (the fast path, :mod:`.integrate`) and :class:`ReducedSettings` (its
-reduced model, :mod:`.reduced`) are reached from a run's configuration
+reduced model, :mod:`hifumotion.reduced`) are reached from a run's configuration
 (``[estimation.model.creep]``, ``[estimation.model.reduced]``) and ``--set``: they are
 validated there by their annotations — a value's type, and the ranges the ``Annotated``
 bounds give — and passed on to the solver as they are. Their defaults live here only.
@@ -64,7 +64,7 @@ class CreepSettings:
         voxel's rotation taken out of its strain (:mod:`.corotation`), so that a sample may
         turn and slide far with no stress the turn made; ``"neo_hooke"``: finite strain, the
         truth's nearly incompressible neo-Hooke (:mod:`.neo_hooke`). All three agree at small
-        strain. The reduced model takes small strain or corotational (:mod:`.reduced_corotation`).
+        strain. The reduced model takes small strain or corotational (:mod:`hifumotion.reduced.corotated_force`).
     """
 
     tolerance: Positive = 0.005
@@ -99,28 +99,28 @@ class ReducedSettings:
         A candidate is in contact when its gap is below this many spacings.
     kept_on_solid
         A node on a plane or the bar's face at rest whose gap stayed within this many spacings
-        in every snapshot is held there by the modes (:func:`~.reduced.held_on_solids`; 1 %,
+        in every snapshot is held there by the modes (:func:`~hifumotion.reduced.model.held_on_solids`; 1 %,
         the penetration the twins' physicality check allows); 0 holds none.
     friction
-        Coulomb's friction on the candidates (:mod:`.reduced_friction`); False leaves sliding
+        Coulomb's friction on the candidates (:mod:`hifumotion.reduced.friction`); False leaves sliding
         free (the reduced model before it, kept to measure what friction buys).
     friction_touch
         A friction candidate presses while its gap is below this many spacings.
     friction_balance
         The floor's and the bar's face's normal reactions scaled to what the sample's balance
-        gives each (the net weight, the bar's push; :meth:`~.reduced_friction.ReducedFriction.balanced`):
+        gives each (the net weight, the bar's push; :meth:`~hifumotion.reduced.friction.ReducedFriction.balanced`):
         the candidates' own rows carried a tenth of it on a stuck slide. Off by default: measured
         mixed (docs/decisions.md, "A friction the reduced model is run at"). False takes the rows as they are.
     friction_rounds, friction_rtol
         A step re-linearises the friction at most this many times, until the law holds to
         ``friction_rtol`` of each node's μ_f λ_n.
     hyper_reduction, hyper_tolerance, hyper_samples
-        Eq. 16's viscosity on ECSW's sampled voxels (:mod:`.hyper`), fitted to this relative
+        Eq. 16's viscosity on ECSW's sampled voxels (:mod:`hifumotion.reduced.hyper`), fitted to this relative
         error on ``hyper_samples`` of the snapshots' velocities; False sums every voxel.
     corotation_tolerance, rotation_rounds
         A corotational mesh (``CreepSettings.kinematics``): its elastic force on ECSW's sampled
         voxels, fitted to this relative error on ``hyper_samples`` of the snapshots' states (0 sums
-        every voxel; :mod:`.reduced_corotation`); a step takes the rotations again at most
+        every voxel; :mod:`hifumotion.reduced.corotated_force`); a step takes the rotations again at most
         ``rotation_rounds`` times while its solution turns on (the settled state: four times as many).
     tolerance, max_step_s, first_step_s
         The step controller's, as :class:`~.integrate.CreepSettings` (spacings, s).

@@ -92,14 +92,14 @@ class ModelSpec:
         return self.scene.particles.spacing_mm
 
     def reduced(self, k: "Parameters", last_frame: int, progress=None):
-        """The reduced model (:mod:`hifumotion.creep.reduced`) of this spec around ``k``: its modes
+        """The reduced model (:mod:`hifumotion.reduced.model`) of this spec around ``k``: its modes
         from full runs at F/E × ``settings.reduced_span`` to ``last_frame`` (made on first use
         or when asked for other parameters or a longer run, then kept)."""
         if self._reduced is not None:
             model, at, frames = self._reduced
             if at == k and frames >= last_frame:
                 return model
-        from hifumotion.creep.scene import reduced_creep
+        from hifumotion.reduced.build import reduced_creep
 
         model = reduced_creep(self.snapshot_scenes(k, last_frame), self.voxels(), self.tissue_volume_mm3,
                               self.settings.reduced, progress=progress, creep=self.settings.creep)
@@ -125,7 +125,7 @@ class ModelSpec:
         """Make and keep the reduced model around ``k`` from its snapshot runs made elsewhere
         (:func:`~hifumotion.creep.scene.snapshot_run` of each of :meth:`snapshot_scenes`, e.g. on a
         cluster's cores)."""
-        from hifumotion.creep.scene import reduced_from_runs
+        from hifumotion.reduced.build import reduced_from_runs
 
         scenes = self.snapshot_scenes(k, last_frame)
         model = reduced_from_runs(scenes[0], self.voxels(), runs, self.settings.reduced, self.settings.creep)
@@ -281,9 +281,9 @@ def _explicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
 
 
 def _reduced(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
-    """The reduced model (:mod:`hifumotion.creep.reduced`), its modes made once around the first
+    """The reduced model (:mod:`hifumotion.reduced.model`), its modes made once around the first
     parameters asked for (:meth:`ModelSpec.reduced`)."""
-    from hifumotion.creep.scene import simulate_reduced
+    from hifumotion.reduced.build import simulate_reduced
 
     made = spec._reduced[1] if spec._reduced is not None else k
     return simulate_reduced(scene, spec.reduced(made, last_frame), spec.tissue_volume_mm3)
@@ -314,7 +314,7 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), f
     ``keep_frames``: frames whose tissue particles are returned as well (for masks).
     ``full``: run the full model the spec's integrator reduces (:attr:`ForwardModel.full`; the
     spec's own when it is a full one). ``snapshots``: a list to which that full run appends its
-    nodes' motion (a reduced model's snapshot, :func:`~hifumotion.creep.scene.reduced_from_runs`;
+    nodes' motion (a reduced model's snapshot, :func:`~hifumotion.reduced.build.reduced_from_runs`;
     only the fast path keeps them, so it implies ``full`` and the implicit integrator).
     Raises :class:`~hifumotion.errors.InputError` for parameters outside the model's
     validity (ν ≥ 0.5, E ≤ 0 …).

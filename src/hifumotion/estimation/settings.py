@@ -51,7 +51,7 @@ class ModelSettings:
     contour_points: Annotated[int, Ge(8), Le(10_000)] = 64   # size of the point set A
     integrator: Literal["implicit", "explicit", "reduced"] = "implicit"  # one of INTEGRATORS: "implicit", the fast path (hifumotion.creep);
                                         # "explicit", Eq. 8–20 as the paper; "reduced", the fast path's
-                                        # POD–Galerkin model (hifumotion.creep.reduced)
+                                        # POD–Galerkin model (hifumotion.reduced.model)
     reduced_span: tuple[float, float] = (0.5, 2.0)   # F/E multiples of the full runs the reduced model's modes come from
     creep: CreepSettings = field(default_factory=CreepSettings)        # the implicit path's (and the snapshots')
     reduced: ReducedSettings = field(default_factory=ReducedSettings)  # the reduced model's

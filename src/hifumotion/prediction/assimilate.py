@@ -2,7 +2,7 @@
 
 The paper's Discussion asks that estimating the parameters and predicting the motion be
 "carried out consecutively and repetitively" while the tissue moves. Here the reduced
-model (:mod:`hifumotion.creep.reduced`) is stepped one frame at a time and an extended
+model (:mod:`hifumotion.reduced.model`) is stepped one frame at a time and an extended
 Kalman filter (the reduced-order filter of Moireau & Chapelle, ESAIM: COCV 2011, as SOFA's
 Optimus runs it) corrects its state with each frame's tracked displacement:
 
@@ -14,12 +14,12 @@ Optimus runs it) corrects its state with each frame's tracked displacement:
   β1, β2 stay the calibration's); it follows a random walk of ``scale_walk_per_sqrt_s``
   per √s, so after a change the filter lets the data move it.
 * **Forecast.** One backward-Euler step of the frame interval from the corrected state
-  (:meth:`~hifumotion.creep.reduced.ReducedCreep.step`, contacts and Eq. 16 whole). Its
+  (:meth:`~hifumotion.reduced.model.ReducedCreep.step`, contacts and Eq. 16 whole). Its
   Jacobian is the step's own linearisation
-  (:meth:`~hifumotion.creep.reduced.ReducedCreep.solve_response`): the step's matrix A
+  (:meth:`~hifumotion.reduced.model.ReducedCreep.solve_response`): the step's matrix A
   (its friction's tangent included) inverted on the subspace its pressed contacts leave
   free, on ``∂rhs/∂q = C_r/Δt + M_r/Δt²`` and ``∂rhs/∂a = F(t₊) v_s`` (a driven bar:
-  ``k s(t₊) v_s``, k the penalty that holds its advance, :func:`~hifumotion.creep.reduced.driven_bar`).
+  ``k s(t₊) v_s``, k the penalty that holds its advance, :func:`~hifumotion.reduced.model.driven_bar`).
 * **Analysis.** The observation is the in-plane displacement since frame 0 (mm) of
   material points (the contour points A that speckle tracking carries), linear in q:
   ``y = H (q − q₀)``; its noise ``observation_noise_mm`` per coordinate.
@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hifumotion.creep.integrate import CreepMaterial
-from hifumotion.creep.reduced import ReducedCreep, ReducedState, driven_bar, step_counters
+from hifumotion.reduced.model import ReducedCreep, ReducedState, driven_bar, step_counters
 from hifumotion.errors import InputError
 
 MM = 1e-3

@@ -1,7 +1,7 @@
 """The corotational elastic force in the reduced coordinates, on a sample of voxels (SI inside).
 
-The reduced model (:mod:`.reduced`) of a small-strain mesh has a constant stiffness
-``K_r = Vᵀ K V``, made once. With corotational kinematics (:mod:`.corotation`) each voxel's
+The reduced model (:mod:`.model`) of a small-strain mesh has a constant stiffness
+``K_r = Vᵀ K V``, made once. With corotational kinematics (:mod:`hifumotion.creep.corotation`) each voxel's
 force ``f_e = R_e K_e (R_eᵀ x_e − X_e)`` turns with the voxel, so the reduced force
 ``Vᵀ f(u₀ + V q)`` and its matrix ``Σ_e V_eᵀ R_e K_e R_eᵀ V_e`` change with q, and summing
 them over every voxel would cost a full-model force a step. As for the viscosity
@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from hifumotion.creep.corotation import polar_rotation
-from hifumotion.creep.hyper import greedy_weights
+from hifumotion.reduced.hyper import greedy_weights
 
 
 @dataclass(frozen=True)
@@ -188,7 +188,7 @@ class ReducedCorotation:
     Parameters
     ----------
     matrices
-        The mesh's :class:`~.hexahedra.MeshMatrices`.
+        The mesh's :class:`~hifumotion.creep.hexahedra.MeshMatrices`.
     rest_m
         ``(n, 3)`` the nodes at rest (m).
     node_modes_m
@@ -369,7 +369,7 @@ def _forces(settled, modes, q, local, grads, dev, vol, two_g, kappa, weights, ro
 def _rotations(u: np.ndarray, grads: np.ndarray) -> np.ndarray:
     """``(voxels, 3, 3)`` R of F = R U at each voxel's centre, F = I + Σ_a u_a ⊗ ∇N_a; ``u``
     ``(voxels, 24)`` its corners' displacements (m), ``grads`` ``(voxels, 8, 3)`` (1/m). An
-    inverted voxel takes the nearest proper rotation (as :mod:`.corotation`)."""
+    inverted voxel takes the nearest proper rotation (as :mod:`hifumotion.creep.corotation`)."""
     out = np.empty((len(u), 3, 3))
     _rotations_into(np.ascontiguousarray(u, float), np.ascontiguousarray(grads, float), out)
     return out

@@ -1,6 +1,6 @@
 """Non-negative least squares started from a guessed active set, compiled.
 
-The reduced model's contact solve (:meth:`~hifumotion.creep.reduced.ReducedCreep._solve`) is a
+The reduced model's contact solve (:meth:`~hifumotion.reduced.model.ReducedCreep._solve`) is a
 least-distance problem that Lawson & Hanson reduce to NNLS (Solving Least Squares Problems,
 1974, ch. 23): ``min |E w − f|`` over ``w ≥ 0``, one column of E per contact row. Steps a
 frame apart press nearly the same rows, but SciPy's NNLS starts every call from an empty

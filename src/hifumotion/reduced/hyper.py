@@ -19,7 +19,7 @@ voxels as there are equations).
 
 :func:`shear_rates` gives each voxel's equivalent shear rate from the reduced velocity
 directly (its centre's strain rate per unit q̇ made once): the same rate as
-:meth:`~.hexahedra.MeshMatrices.rates`, without the node velocities.
+:meth:`~hifumotion.creep.hexahedra.MeshMatrices.rates`, without the node velocities.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The bar's non-penetration in the reduced model (SI inside): the full model's rounded solid,
 its tangent planes taken again at each step's start.
 
-The full model (:mod:`.contact`) holds a node that touches the bar on the solid's tangent
+The full model (:mod:`hifumotion.creep.contact`) holds a node that touches the bar on the solid's tangent
 plane where it touched: a flat face, a rim rounded at the edge radius, a side. The reduced
 model's contact solve (:meth:`.reduced.ReducedCreep._solve`) takes linear rows ``G q ≥ h``,
 so each candidate's signed distance to that solid is linearised at the step's start ``q̄``:
@@ -36,7 +36,7 @@ MM = 1e-3
 class ReducedBarRows:
     """The bar's contact rows on the candidates near it (module docstring).
 
-    ``contacts``: the full model's :class:`~.contact.ContactSet` (its bar's rounded geometry);
+    ``contacts``: the full model's :class:`~hifumotion.creep.contact.ContactSet` (its bar's rounded geometry);
     ``settled_m`` ``(n, 3)`` and ``node_modes`` ``(n, 3, r)`` the reduced basis' settled nodes
     (m) and their modes; ``advance_modes_m`` ``(r,)``; ``advance_at_rest_m`` the bar's advance
     from its scene tip at q = 0; ``surface`` the mesh's surface nodes; ``reach_m``: a surface node

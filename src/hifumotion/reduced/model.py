@@ -1,6 +1,6 @@
 """The reduced forward model: the fast path's creep projected on the modes of its own runs (SI inside).
 
-The fast path (:mod:`.integrate`) solves, per backward-Euler step, a system of three
+The fast path (:mod:`hifumotion.creep.integrate`) solves, per backward-Euler step, a system of three
 unknowns per voxel corner (≈ 17,000 at the paper's 4,399 particles) with contacts as
 constraints, several rounds a step. The motion those steps produce lives in a space of
 a few tens of shapes: the bar's indentation, the bulge beside it, the creep that follows.
@@ -15,7 +15,7 @@ SOFA's ModelOrderReduction):
   every linear constraint all of them keep: a floor node that stuck in every snapshot stays
   on the floor, the nodes under the bar's face move with its advance. The other candidates'
   non-penetration is a small contact solve a step (:meth:`ReducedCreep._solve`); their
-  sliding meets Coulomb's friction (:mod:`.reduced_friction`).
+  sliding meets Coulomb's friction (:mod:`.friction`).
 * **Equation.** ``u = u₀ + V_u q``, ``s = s₀ + v_sᵀ q`` from the settled state (u₀, s₀),
   in equilibrium under gravity and F(0). Backward Euler on Eq. 12–16's forces, projected:
 
@@ -27,11 +27,11 @@ SOFA's ModelOrderReduction):
   viscosity's non-linearity is kept whole; optionally on ECSW's sampled voxels, :mod:`.hyper`),
   ``M_r = V_uᵀ M V_u``. A corotational mesh (``CreepSettings.kinematics``) turns K with each
   voxel: its reduced force and K_R,r are taken on ECSW's sampled voxels at each step's guess
-  and again by the step's rounds while the solution turns on (:mod:`.reduced_corotation`).
+  and again by the step's rounds while the solution turns on (:mod:`.corotated_force`).
   The force F(t) does the work
   ``F s``, so its generalised force is ``F v_s``. The contacts' normal reactions do no work
   on the modes (a pressed node moves only along its surface), so they leave the projected
-  equation; their friction does, and stays (``Wᵀ f``, :mod:`.reduced_friction`).
+  equation; their friction does, and stays (``Wᵀ f``, :mod:`.friction`).
 * **Steps** as the full model's: the local error ``½ Δt |u̇₊ − u̇|`` held near
   ``tolerance`` spacings on a ladder of step sizes, landing on the force schedule's
   breakpoints, frames interpolated between steps.
@@ -48,12 +48,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from hifumotion.creep.hyper import SampledViscosity, ecsw, rate_modes, shear_rates
+from hifumotion.reduced.hyper import SampledViscosity, ecsw, rate_modes, shear_rates
 from hifumotion.creep.integrate import CreepMaterial, CreepResult
-from hifumotion.creep.nnls import load_compiled, nnls_from
-from hifumotion.creep.reduced_bar import ReducedBarRows
-from hifumotion.creep.reduced_corotation import CandidateForces, CorotatedForce, ReducedCorotation, TurnedViscosity
-from hifumotion.creep.reduced_friction import FrictionState, ReducedFriction
+from hifumotion.reduced.nnls import load_compiled, nnls_from
+from hifumotion.reduced.bar_rows import ReducedBarRows
+from hifumotion.reduced.corotated_force import CandidateForces, CorotatedForce, ReducedCorotation, TurnedViscosity
+from hifumotion.reduced.friction import FrictionState, ReducedFriction
 from hifumotion.creep.settings import ReducedSettings
 from hifumotion.errors import InputError
 
@@ -74,7 +74,7 @@ class ReducedBasis:
     settled_nodes_mm
         ``(n, 3)`` the nodes of the settled state the snapshots started from (mm).
     advance_at_rest_mm
-        The bar's advance at rest from its scene tip (mm), as :class:`~.integrate.CreepResult`'s.
+        The bar's advance at rest from its scene tip (mm), as :class:`~hifumotion.creep.integrate.CreepResult`'s.
     singular_values
         Every singular value of the snapshot matrix (the energy the modes keep).
     max_motion_mm
@@ -193,7 +193,7 @@ class ReducedCreep:
     """The creep of a voxel mesh in a :class:`ReducedBasis` (module docstring).
 
     Made once per mesh and basis from the full solver's matrices (``solver``, a
-    :class:`~.integrate.CreepSolver` of the same mesh); each :meth:`run` takes its own
+    :class:`~hifumotion.creep.integrate.CreepSolver` of the same mesh); each :meth:`run` takes its own
     material and force, so a fit's many parameter sets share it.
     """
 
@@ -287,7 +287,7 @@ class ReducedCreep:
 
     def _contact_rows(self, contacts) -> tuple[np.ndarray, np.ndarray, ReducedBarRows | None]:
         """Non-penetration of the contact candidates: the planes' as fixed ``rows @ q ≥ bound``
-        (m), the bar's as :class:`~.reduced_bar.ReducedBarRows`, linearised at each step's start.
+        (m), the bar's as :class:`~.bar_rows.ReducedBarRows`, linearised at each step's start.
 
         A plane candidate's gap is ``g₀ + G q``, ``n·(x − p)``; rows whose G vanishes (a node
         every mode keeps on its plane) are left out. A node that starts inside a plane may not go
@@ -516,7 +516,7 @@ class ReducedCreep:
         """``state`` with what the next step takes from it (lagged, as the full model's): Eq. 16's
         μ from its own rates, and the friction's normal reactions and slid anchors. With the
         bar's push ``bar_force_n`` (N) and ``settings.friction_balance``, the floor's and the face's
-        reactions carry the sample's balance in all (:meth:`~.reduced_friction.ReducedFriction.balanced`)."""
+        reactions carry the sample's balance in all (:meth:`~.friction.ReducedFriction.balanced`)."""
         mu, visc = (None, state.viscous) if loads.material.beta1 <= 0 else self._viscosity(loads.material, state.qdot, state.q)
         friction = state.friction
         if self.friction is not None:
@@ -542,7 +542,7 @@ class ReducedCreep:
 
         ``travel_m(t)`` (travel control, m): the bar driven that far along its axis beyond
         where it rests on this material's settled state, ``force_n`` then not read (the
-        force it takes is a result). Returns the full model's :class:`~.integrate.CreepResult`
+        force it takes is a result). Returns the full model's :class:`~hifumotion.creep.integrate.CreepResult`
         (nodes, particles, the bar's advance and force at every frame); ``nodes=False`` leaves
         the nodes out (none of the particles' consumers needs them; they cost as much again).
         ``friction``: Coulomb's μ_f of the floor, walls and bar's face (None: the one the model was

@@ -1,9 +1,9 @@
 """Coulomb's friction in the reduced model (SI inside): the full model's law on reduced coordinates.
 
-The reduced model (:mod:`.reduced`) keeps non-penetration through its modes and a small
+The reduced model (:mod:`.model`) keeps non-penetration through its modes and a small
 contact solve, but a mode that slides along the floor or the bar's face cost nothing
 beyond its elastic part: the full model's floor resists it with Coulomb's friction
-(:mod:`.contact`). Measured on the oblique twin, where the tilted bar slides the sample,
+(:mod:`hifumotion.creep.contact`). Measured on the oblique twin, where the tilted bar slides the sample,
 the reduced model without friction was 6–19 % off the full model's contour motion
 (docs/decisions.md, "Friction in the reduced model"). This module gives it the same law:
 
@@ -21,10 +21,10 @@ the reduced model without friction was 6–19 % off the full model's contour mot
   rounds take the last round's.
 * **The law.** Each pressing node's tangential displacement from its anchor, ``d = W q −
   a`` (W: its modes in the contact's tangents), meets ``f = μ_f λ_n d / max(|d|, ε)``
-  (:func:`~.contact.friction_force`); a step linearises it (:func:`~.contact.friction_linearised`,
+  (:func:`~hifumotion.creep.contact.friction_force`); a step linearises it (:func:`~hifumotion.creep.contact.friction_linearised`,
   Newton's tangent) and re-solves until the law holds to ``friction_rtol`` of μ_f λ_n at
   the solution, and after the step an anchor farther than ε is dragged to ε
-  (:meth:`~.contact.ContactSet.slide`'s rule). A node that stops pressing forgets its
+  (:meth:`~hifumotion.creep.contact.ContactSet.slide`'s rule). A node that stops pressing forgets its
   anchor and takes a new one where it touches again.
 
 Projected, the linearised force adds ``Wᵀ S W`` to the step's matrix and ``Wᵀ (S a − c)``
@@ -60,7 +60,7 @@ class FrictionState:
 class ReducedFriction:
     """Coulomb's friction on the contact candidates of a reduced model (module docstring).
 
-    ``solver``: the full model (:class:`~.integrate.CreepSolver`) whose mesh, matrices,
+    ``solver``: the full model (:class:`~hifumotion.creep.integrate.CreepSolver`) whose mesh, matrices,
     contacts and body force the modes were made on; ``node_modes_m`` ``(3n, r)``,
     ``advance_modes_m`` ``(r,)`` and ``settled_nodes_mm`` the reduced basis'; ``reach_m``: a
     node farther than this from a solid at the settled state is no candidate.
@@ -176,7 +176,7 @@ class ReducedFriction:
         """λ_n (N) of every candidate at ``q`` moving at ``qdot``, Eq. 16's μ per voxel of the
         mesh (None: no viscosity) — the normal part of what its equation of motion lacks.
         ``elastic_n``: each candidate's elastic force along its normal (N) when the elasticity is
-        not the small-strain K's rows (a corotational model's, :class:`~.reduced_corotation.CandidateForces`)."""
+        not the small-strain K's rows (a corotational model's, :class:`~.corotated_force.CandidateForces`)."""
         if elastic_n is None:
             elastic_n = (two_g * (self.elastic_modes[0] @ q + self.elastic_settled[0])
                          + kappa * (self.elastic_modes[1] @ q + self.elastic_settled[1]))

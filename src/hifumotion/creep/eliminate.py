@@ -1,4 +1,4 @@
-"""The reduced system's matrix ``Tᵀ A T``, node block by node block (a Numba kernel).
+"""The constrained system's matrix ``Tᵀ A T``, node block by node block (a Numba kernel).
 
 The creep's unknowns are eliminated per node (:meth:`~.integrate.CreepSolver._reduction`):
 node i's displacement is ``u_i = P_i q_i + n_i s`` with ``P_i`` a 3 × 3 matrix whose columns
@@ -17,9 +17,9 @@ from numba import njit, prange
 
 
 @njit(cache=True, parallel=True)
-def _reduced_blocks(indptr, indices, data, columns, bar_normal, with_s, out, bar_diagonal):
+def _eliminated_blocks(indptr, indices, data, columns, bar_normal, with_s, out, bar_diagonal):
     n = columns.shape[0]
-    last = indptr[3 * n] + 3 * n   # where the bar's row starts in the reduced pattern
+    last = indptr[3 * n] + 3 * n   # where the bar's row starts in the eliminated pattern
     for i in prange(n):
         r0 = 3 * i
         start = indptr[r0]
@@ -39,7 +39,7 @@ def _reduced_blocks(indptr, indices, data, columns, bar_normal, with_s, out, bar
                 for c in range(3):
                     tmp[a, c] = blk[a, 0] * pj[0, c] + blk[a, 1] * pj[1, c] + blk[a, 2] * pj[2, c]
             for a in range(3):
-                # each earlier row of the reduced pattern has one more entry (its bar column)
+                # each earlier row of the eliminated pattern has one more entry (its bar column)
                 base = indptr[r0 + a] + 3 * b + ((r0 + a) if with_s else 0)
                 for c in range(3):
                     out[base + c] = pi[0, a] * tmp[0, c] + pi[1, a] * tmp[1, c] + pi[2, a] * tmp[2, c]
@@ -56,13 +56,13 @@ def _reduced_blocks(indptr, indices, data, columns, bar_normal, with_s, out, bar
             bar_diagonal[i] = ni[0] * sv[0] + ni[1] * sv[1] + ni[2] * sv[2]
 
 
-def reduced_matrix_data(a_indptr: np.ndarray, a_indices: np.ndarray, a_data: np.ndarray, columns: np.ndarray,
+def eliminated_matrix_data(a_indptr: np.ndarray, a_indices: np.ndarray, a_data: np.ndarray, columns: np.ndarray,
                         bar_normal: np.ndarray, with_bar: bool) -> np.ndarray:
-    """The data of ``Tᵀ A T`` on the reduced pattern (module docstring).
+    """The data of ``Tᵀ A T`` on the eliminated pattern (module docstring).
 
     ``A`` is a CSR matrix of 3 × 3 node-pair blocks with sorted columns (the mesh's
     :class:`~.hexahedra.Assembly`); ``columns`` ``(n, 3, 3)`` the nodes' ``P_i``,
-    ``bar_normal`` ``(n, 3)`` their ``n_i`` (0 off the bar). The reduced pattern is A's with,
+    ``bar_normal`` ``(n, 3)`` their ``n_i`` (0 off the bar). The eliminated pattern is A's with,
     when ``with_bar``, one more column (the bar's advance, last in every row) and a last
     row over every column; its data come back in that order.
     """
@@ -70,7 +70,7 @@ def reduced_matrix_data(a_indptr: np.ndarray, a_indices: np.ndarray, a_data: np.
     size = len(a_data) + (2 * 3 * n + 1 if with_bar else 0)
     out = np.zeros(size)
     bar_diagonal = np.zeros(n)
-    _reduced_blocks(a_indptr.astype(np.int64), a_indices.astype(np.int64), a_data,
+    _eliminated_blocks(a_indptr.astype(np.int64), a_indices.astype(np.int64), a_data,
                     np.ascontiguousarray(columns, np.float64), np.ascontiguousarray(bar_normal, np.float64),
                     bool(with_bar), out, bar_diagonal)
     if with_bar:
@@ -78,4 +78,4 @@ def reduced_matrix_data(a_indptr: np.ndarray, a_indices: np.ndarray, a_data: np.
     return out
 
 
-__all__ = ["reduced_matrix_data"]
+__all__ = ["eliminated_matrix_data"]
