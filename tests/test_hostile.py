@@ -501,6 +501,9 @@ CASES = [
     (["simulate", "scene_duration.toml", "-o", "out"], "duration_s"),
     (["simulate", "scene_steps.toml", "-o", "out"], "max_step_s"),
     (["simulate", "scene_interval.toml", "--integrator", "implicit", "-o", "out"], "output_interval_s"),
+    # an integrator that cannot run a scene alone, or none of that name: refused naming the option
+    (["simulate", "--integrator", "reduced", "-o", "out"], "--integrator"),
+    (["simulate", "--integrator", "implicitt", "-o", "out"], "--integrator"),
     (["experiment", "--config", "twin_seed.toml", "-o", "out"], "seed"),
     # physics no tank or tissue has: refused by the scene's validation, naming the setting
     (["simulate", "scene_water.toml", "-o", "out"], "water_depth_mm"),

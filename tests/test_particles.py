@@ -292,6 +292,12 @@ def test_command_line_simulate_and_validate(tmp_path):
     assert (tmp_path / "out" / "frames.pvd").exists() and (tmp_path / "out" / "run_info.json").exists()
     again = run("simulate", str(scene), "-o", "out")
     assert again.returncode == 2 and "--overwrite" in again.stderr
+    # the fast path through the same table of forward models: its own frames, named on the console
+    coarse = tmp_path / "coarse.toml"
+    coarse.write_text(printed.stdout.replace("spacing_mm = 1.5", "spacing_mm = 2.5").replace("duration_s = 1.0", "duration_s = 0.1"))
+    fast = run("simulate", str(coarse), "--integrator", "implicit", "-o", "fast")
+    assert fast.returncode == 0, fast.stderr
+    assert (tmp_path / "fast" / "creep.pvd").exists() and "creep.pvd" in " ".join((fast.stdout + fast.stderr).split())
     checked = run("validate", "rotation", "--json")
     assert checked.returncode == 0
     result = json.loads(checked.stdout)

@@ -20,7 +20,7 @@ def simulate(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
     print_scene: bool = typer.Option(False, "--print-scene", help="Print the scene (every field, with its unit) as TOML and exit."),
     settings: Optional[list[str]] = typer.Option(None, "--set", help="Change one setting: KEY=VALUE, KEY a dotted path (bar.force_n=0.3, run.duration_s=2); repeatable."),
-    integrator: str = typer.Option("explicit", "--integrator", help="explicit: the paper's particle framework (SPH water, Eq. 8–20); implicit: the fast path (the tissue's creep, contacts as constraints, water as buoyancy)."),
+    integrator: str = typer.Option("explicit", "--integrator", help="explicit: the paper's particle framework (SPH water, Eq. 8–20); implicit: the fast path (the tissue's creep, contacts as constraints, water as buoyancy). The reduced model runs only around a fit (calibrate, predict)."),
 ) -> None:
     """Simulate tissue, water and bar: frames/*.vtu + frames.pvd (ParaView), bar_pose.csv, run_info.json.
 
@@ -29,8 +29,8 @@ def simulate(
     from hifumotion.config import dump_toml
     from hifumotion.console import progress_fraction
     from hifumotion.io import output_folder, write_json
+    from hifumotion.estimation.model import forward_model
     from hifumotion.particles.scene import load_scene
-    from hifumotion.particles.simulate import simulate as run
     from hifumotion.run_info import RunRecord
 
     scene = load_scene(scene_file, settings)
@@ -39,14 +39,16 @@ def simulate(
         return
     if output is None:
         raise InputError("give an output folder", "--output")
-    if integrator not in ("explicit", "implicit"):
-        raise InputError(f"unknown integrator {integrator!r}; expected explicit or implicit", "--integrator")
-    if integrator == "implicit":
-        from hifumotion.creep.scene import simulate_creep as run
+    try:
+        model = forward_model(integrator)
+        if model.scene_run is None:
+            model.simulate(scene)           # says why, naming the models that can
+    except InputError as exc:
+        raise InputError(exc.reason, "--integrator") from None
     record = RunRecord("simulate", config={**json.loads(scene.model_dump_json()), "integrator": integrator})
     with output_folder(output, overwrite, inputs=(scene_file, scene.tissue.particles_csv)) as out:
         with record.stage("simulate"), progress_fraction("simulate") as update:
-            result = run(scene, out, progress=update)
+            result = model.simulate(scene, out, progress=update)
         record.extra["scene"] = result.facts
         record.extra["steps"] = result.steps
         write_json(out / "summary.json", {
@@ -55,8 +57,7 @@ def simulate(
             "bar_centre_mm": result.bar_centre_mm.round(4).tolist(),
         })
         record.write(out)
-    pvd = "creep.pvd" if integrator == "implicit" else "frames.pvd"
-    console.print(f"simulation in {output.resolve()}: open {pvd} in ParaView "
+    console.print(f"simulation in {output.resolve()}: open {model.pvd} in ParaView "
                   f"({len(result.times_s)} frames, {result.steps} steps)", highlight=False)
 
 

@@ -244,14 +244,28 @@ class ForwardModel:
     picks one (:func:`forward_model`). Callers ask it what it is, never test its name.
 
     ``reduces``: the full integrator whose runs make this one's modes (``None``: a full model) —
-    a reduced model needs full runs before it runs, and is checked against that full model."""
+    a reduced model needs full runs before it runs, and is checked against that full model.
+    ``scene_run``: how it runs a user's scene file as it stands (``hifumotion simulate``:
+    ``(scene, folder, progress) → SimulationResult``, its frames written into ``folder`` as
+    ``pvd`` names them); ``None`` where it cannot (a reduced model has no modes before its full
+    runs)."""
 
     name: str
     run: Callable
     reduces: str | None = None
+    scene_run: Callable | None = None
+    pvd: str = ""
 
     def __call__(self, spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
         return self.run(spec, scene, k, last_frame)
+
+    def simulate(self, scene: Scene, folder=None, progress=None):
+        """Run ``scene`` as it stands, writing its frames into ``folder`` (:attr:`scene_run`)."""
+        if self.scene_run is None:
+            runnable = ", ".join(n for n, m in FORWARD_MODELS.items() if m.scene_run is not None)
+            raise InputError(f"the {self.name} model is made from full runs around a fit and cannot run a scene "
+                             f"alone; expected {runnable}", "integrator")
+        return self.scene_run(scene, folder, progress=progress)
 
     @property
     def is_reduced(self) -> bool:
@@ -289,9 +303,22 @@ def _reduced(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
     return simulate_reduced(scene, spec.reduced(made, last_frame), spec.tissue_volume_mm3)
 
 
-#: The integrators behind :func:`run_model`, by ``ModelSettings.integrator``.
+def _implicit_scene(scene: Scene, folder=None, progress=None):
+    from hifumotion.creep.scene import simulate_creep
+
+    return simulate_creep(scene, folder, progress=progress)
+
+
+def _explicit_scene(scene: Scene, folder=None, progress=None):
+    from hifumotion.particles.simulate import simulate
+
+    return simulate(scene, folder, progress=progress)
+
+
+#: The integrators behind :func:`run_model` and ``hifumotion simulate``, by ``ModelSettings.integrator``.
 FORWARD_MODELS: dict[str, ForwardModel] = {m.name: m for m in (
-    ForwardModel("implicit", _implicit), ForwardModel("explicit", _explicit),
+    ForwardModel("implicit", _implicit, scene_run=_implicit_scene, pvd="creep.pvd"),
+    ForwardModel("explicit", _explicit, scene_run=_explicit_scene, pvd="frames.pvd"),
     ForwardModel("reduced", _reduced, reduces="implicit"))}
 assert tuple(FORWARD_MODELS) == INTEGRATORS, "every integrator the settings accept has a forward model"
 
@@ -304,6 +331,8 @@ def forward_model(spec_or_integrator) -> ForwardModel:
         name = name.settings.integrator
     elif isinstance(name, ModelSettings):
         name = name.integrator
+    if name not in FORWARD_MODELS:
+        raise InputError(f"unknown integrator {name!r}; expected {', '.join(FORWARD_MODELS)}", "integrator")
     return FORWARD_MODELS[name]
 
 
