@@ -326,7 +326,7 @@ class Evaluator:
         self.snapshots = [(tuple(theta), r) for r in runs] + here + [s for s in self.snapshots
                                                                     if not np.array_equal(s[0], theta)]
         ran = time.perf_counter()
-        self.spec.adopt_reduced(k, last, [r for _, r in self.snapshots])
+        model = self.spec.adopt_reduced(k, last, [r for _, r in self.snapshots])
         made = time.perf_counter()
         self._remote = self._client.scatter([self.spec, self.data], broadcast=True)
         # a model made again at the same θ from more runs is another model: its runs are not cached
@@ -335,7 +335,7 @@ class Evaluator:
         self.reductions.append({"snapshot_runs_s": ran - started, "model_s": made - ran, "sent_s": done - made,
                                 "snapshot_run_s": [float(r.stats.get("seconds", 0.0)) for r in runs],
                                 "snapshots": len(self.snapshots),
-                                "modes": int(self.spec._reduced[0].basis.size)})
+                                "modes": int(model.basis.size)})
         return done - started
 
     def full_runs(self, thetas: list[np.ndarray], upto: int | None = None) -> list[np.ndarray]:

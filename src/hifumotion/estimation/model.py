@@ -59,6 +59,16 @@ class Parameters:
         return replace(self, **changes)
 
 
+@dataclass(frozen=True)
+class KeptReduced:
+    """The reduced model a :class:`ModelSpec` keeps: the model, the parameters whose full runs
+    it was made around and the last frame those runs reached."""
+
+    model: object                   # hifumotion.reduced.model.ReducedCreep
+    made_at: "Parameters"
+    last_frame: int
+
+
 @dataclass
 class ModelSpec:
     """Everything a forward run needs, as plain data (mm, s)."""
@@ -72,7 +82,7 @@ class ModelSpec:
     surface_vertices_mm: np.ndarray | None = None   # the reconstructed surface, moved as the particles were
     surface_faces: np.ndarray | None = None
     _voxels: object = field(default=None, repr=False, compare=False)  # the fast path's mesh, made once
-    _reduced: object = field(default=None, repr=False, compare=False)  # (ReducedCreep, the Parameters it was made at)
+    _reduced: KeptReduced | None = field(default=None, repr=False, compare=False)   # made on first use, then kept
 
     def voxels(self):
         """The fast path's conforming voxel mesh of the tissue (made on first use, then kept)."""
@@ -95,16 +105,20 @@ class ModelSpec:
         """The reduced model (:mod:`hifumotion.reduced.model`) of this spec around ``k``: its modes
         from full runs at F/E × ``settings.reduced_span`` to ``last_frame`` (made on first use
         or when asked for other parameters or a longer run, then kept)."""
-        if self._reduced is not None:
-            model, at, frames = self._reduced
-            if at == k and frames >= last_frame:
-                return model
+        kept = self._reduced
+        if kept is not None and kept.made_at == k and kept.last_frame >= last_frame:
+            return kept.model
         from hifumotion.reduced.build import reduced_creep
 
         model = reduced_creep(self.snapshot_scenes(k, last_frame), self.voxels(), self.tissue_volume_mm3,
                               self.settings.reduced, progress=progress, creep=self.settings.creep)
-        self._reduced = (model, k, last_frame)
+        self._reduced = KeptReduced(model, k, last_frame)
         return model
+
+    @property
+    def reduced_made_at(self) -> "Parameters | None":
+        """The parameters the kept reduced model was made around (``None``: none made yet)."""
+        return None if self._reduced is None else self._reduced.made_at
 
     def snapshot_scenes(self, k: "Parameters", last_frame: int) -> list:
         """The scenes whose full runs make the reduced model around ``k`` (F/E × ``reduced_span``;
@@ -129,7 +143,7 @@ class ModelSpec:
 
         scenes = self.snapshot_scenes(k, last_frame)
         model = reduced_from_runs(scenes[0], self.voxels(), runs, self.settings.reduced, self.settings.creep)
-        self._reduced = (model, k, last_frame)
+        self._reduced = KeptReduced(model, k, last_frame)
         return model
 
 
@@ -299,7 +313,7 @@ def _reduced(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
     parameters asked for (:meth:`ModelSpec.reduced`)."""
     from hifumotion.reduced.build import simulate_reduced
 
-    made = spec._reduced[1] if spec._reduced is not None else k
+    made = spec.reduced_made_at or k
     return simulate_reduced(scene, spec.reduced(made, last_frame), spec.tissue_volume_mm3)
 
 
@@ -368,6 +382,6 @@ def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), f
     return ModelRun(k, frames, points, rest, kept, sim.bar_centre_mm, sim.steps, time.perf_counter() - t0)
 
 
-__all__ = ["Parameters", "ModelSettings", "ModelSpec", "ModelRun", "ForwardModel", "FORWARD_MODELS", "forward_model",
+__all__ = ["Parameters", "ModelSettings", "ModelSpec", "KeptReduced", "ModelRun", "ForwardModel", "FORWARD_MODELS", "forward_model",
            "model_spec",
            "scene_for", "run_model"]
