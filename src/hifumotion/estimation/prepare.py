@@ -189,7 +189,9 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     reconstructed tissue touches the bar as the real one does.
 
     ``continue_bloom``: with speckle tracking, give frame 0's target the strip the bar's bloom
-    hides where tissue is seen at its edge (:func:`~hifumotion.speckle.segment_target`).
+    hides where the reconstruction (its top continued under the bar, ``fill_bar_cap``) holds
+    tissue, so that the tracked frame 0 and the model's shape agree there; without a bar cap,
+    where tissue is seen at the bloom's edge (:func:`~hifumotion.speckle.segment_target`).
     """
     from hifumotion.observed import shift_boundary
     from hifumotion.segmentation import track
@@ -238,8 +240,16 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     if tracking == "speckle":
         from hifumotion.speckle import follow
 
+        shape = None
+        if continue_bloom and cap is not None and not cap.skipped:
+            from hifumotion.observed.solids import imaging_plane
+
+            plane = imaging_plane(observed.setup)
+            pts = plane.points_mm().reshape(-1, 3)
+            shape = rec.inside(pts - offset).reshape(tuple(plane.shape))
         motion = follow(observed.frames.astype(np.float32) / 255.0, init, px, solids=frame_solids(observed),
-                        boundary_offset_mm=boundary_offset_mm, method=method, continue_bloom=continue_bloom)
+                        boundary_offset_mm=boundary_offset_mm, method=method, continue_bloom=continue_bloom,
+                        bloom_shape_mm=shape)
         masks = motion.masks.copy()
     else:
         masks = track(observed.frames, init, method, spacing=px, exclude=known_solid_mask(observed.setup, z_frames)).masks

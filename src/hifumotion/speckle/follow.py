@@ -132,7 +132,7 @@ def region_leak(mask: np.ndarray, given: np.ndarray) -> float:
 
 def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Solids | None = None,
                    boundary_offset_mm: float = 0.0, method: str = "glcv", continue_bloom: bool = False,
-                   **params: Any) -> TargetSegmentation:
+                   bloom_shape_mm: np.ndarray | None = None, **params: Any) -> TargetSegmentation:
     """Segment the target on one frame with the known solids taken out of the image.
 
     1. The tissue's and the background's grey levels are read inside and well outside the
@@ -145,11 +145,17 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
     3. The segmentation, less the solids, is moved inwards by ``boundary_offset_mm`` (the
        imaging system's, measured on a phantom) on its free boundary only: where it lies on a
        solid it is already where the solid's surface is.
-    4. With ``continue_bloom``, the strip the bloom hid is given back where tissue is seen at
-       the bloom's edge (:func:`~hifumotion.observed.solids.continue_into_bloom`): tissue
-       pressed by the bar reaches the bar, and a section cut off at the bloom's edge is biased
-       away from it in every frame it is carried to (off by default: docs/decisions.md,
-       "Frame 0's target reaches the bar").
+    4. With ``continue_bloom``, the strip the bloom hid is given back: tissue pressed by the
+       bar reaches the bar, and a section cut off at the bloom's edge is biased away from it in
+       every frame it is carried to (off by default: docs/decisions.md, "Frame 0's target
+       reaches the bar"). Where ``bloom_shape_mm`` is given — the resting tissue's signed
+       distance (mm, positive inside) at this frame's pixels, known apart from it (the sweep's
+       reconstruction, its top continued under the bar) — a hidden pixel is target where that
+       shape holds tissue, so the strip follows the tissue's own surface, touching the face
+       where it does and curving away from it where it does; without it, where tissue is seen
+       at the bloom's edge on the line from the bar
+       (:func:`~hifumotion.observed.solids.continue_into_bloom`), which fills the strip up to
+       the face.
     5. A segmentation that leaves the given region (more than :data:`REGION_LEAK_FRACTION` of
        it beyond :data:`REGION_MARGIN` of the region's radius) is not the target drawn: the given
        region is kept instead, and ``given_region_kept`` says so.
@@ -186,9 +192,18 @@ def segment_target(image: np.ndarray, init: Any, spacing_mm=None, *, solids: Sol
         mask = shift_boundary(mask | excluded, boundary_offset_mm, pixel) & ~excluded
     continued = 0
     if continue_bloom and mask.any() and max(bloom) > 0:
-        # the strip the bloom hid, where tissue is seen at the bloom's edge (it lies on the
-        # bar, so the free boundary's offset does not apply to it)
-        grown = continue_into_bloom(mask, solids.bar, bloom) & ~solid
+        # the strip the bloom hid (it lies on the bar, so the free boundary's offset does not
+        # apply to it): by the known shape where there is one, else by the image's edge
+        if bloom_shape_mm is not None:
+            shape = np.asarray(bloom_shape_mm, float)
+            if shape.shape != mask.shape:
+                raise InputError(f"the bloom's shape has {shape.shape} pixels, the frame {mask.shape}", "bloom_shape_mm")
+            hidden = bloom_mask(solids.bar, bloom) & ~solid & (shape > 0)
+            # only what joins the target: another body the shape holds is not this one
+            labels, _ = ndimage.label(mask | hidden)
+            grown = np.isin(labels, np.unique(labels[mask])) & (mask | hidden)
+        else:
+            grown = continue_into_bloom(mask, solids.bar, bloom) & ~solid
         continued = int(grown.sum() - mask.sum())
         mask = grown
     if not mask.any():
@@ -233,7 +248,8 @@ def refine_in_band(image: np.ndarray, carried: np.ndarray, excluded: np.ndarray,
 def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = None,
            boundary_offset_mm: float = 0.0, method: str = "glcv", series: DisplacementSeries | None = None,
            point_step_px: float = 1.0, refine_iterations: int = 0, refine_band_px: int = 2,
-           progress: bool = False, continue_bloom: bool = False, **params: Any) -> FollowResult:
+           progress: bool = False, continue_bloom: bool = False, bloom_shape_mm: np.ndarray | None = None,
+           **params: Any) -> FollowResult:
     """Segment frame 0 and carry its contour through the cine loop by speckle tracking.
 
     Parameters
@@ -265,9 +281,10 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
         keeps the carried contour as it is.
     progress
         Show a progress bar.
-    continue_bloom
-        Give frame 0's target the strip the bar's bloom hides where tissue is seen at its edge
-        (:func:`segment_target`).
+    continue_bloom, bloom_shape_mm
+        Give frame 0's target the strip the bar's bloom hides: where the known resting shape
+        (signed distance, mm, positive inside, at frame 0's pixels) holds tissue, or without
+        one where tissue is seen at the bloom's edge (:func:`segment_target`).
     """
     from hifumotion.observed.solids import bloom_mask
     from hifumotion.sequence import ImageSequence
@@ -280,7 +297,7 @@ def follow(frames: Any, init: Any, spacing_mm=None, *, solids: Solids | None = N
     shape = frames.shape[1:]
     t0 = time.perf_counter()
     first = segment_target(frames[0], init, spacing_mm, solids=solids, boundary_offset_mm=boundary_offset_mm,
-                           method=method, continue_bloom=continue_bloom, **params)
+                           method=method, continue_bloom=continue_bloom, bloom_shape_mm=bloom_shape_mm, **params)
     contour0 = Contour.from_mask(first.mask, spacing_mm)
     points0 = contour0.resampled(point_step_px).points_px
     first_s = time.perf_counter() - t0
