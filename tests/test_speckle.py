@@ -498,3 +498,38 @@ def test_frame_zeros_target_reaches_the_bar_it_is_pressed_on():
 
     assert np.hypot(*(centroid(got.mask) - centroid(truth))) < 0.5
     assert np.hypot(*(centroid(got.mask & ~band) - centroid(truth))) > 1.0
+
+
+def test_a_known_shape_continues_a_round_target_into_the_bloom_along_its_own_surface():
+    """A disc resting on a bar's flat face touches it at one point and curves away from it: the
+    bloom hides the touching arc and the water wedges beside it. Given the disc's own signed
+    distance (the reconstruction's, in prepare), the strip given back is the disc's: its hidden
+    pixels back, none of the wedges' water. The image's rule, which fills every line on which
+    tissue shows at the bloom's edge up to the face, fills the wedges too."""
+    from scipy import ndimage
+
+    from hifumotion.observed.solids import Solids, bloom_mask
+    from hifumotion.speckle.follow import segment_target
+
+    shape, pixel_mm = (140, 180), 0.2
+    rows, cols = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
+    face_row, radius = 110.0, 40.0
+    bar = (rows >= face_row) & (rows < face_row + 14) & (np.abs(cols - 90) < 40)
+    signed_px = radius - np.hypot(rows - (face_row - 0.5 - radius), cols - 90)    # touches the face
+    truth = signed_px > 0
+    rng = np.random.default_rng(5)
+    echo = 0.05 + truth * rng.rayleigh(0.45, shape) + 1.5 * bar
+    image = np.clip(ndimage.gaussian_filter(echo, (1.0, 2.0)), 0, 1).astype(np.float32)
+    rough = ndimage.binary_erosion(truth, iterations=4)
+    solids = Solids(np.zeros_like(bar), bar)
+    by_image = segment_target(image, rough, pixel_mm, solids=solids, continue_bloom=True)
+    by_shape = segment_target(image, rough, pixel_mm, solids=solids, continue_bloom=True,
+                              bloom_shape_mm=signed_px * pixel_mm)
+    band = bloom_mask(bar, by_shape.bloom_px) & ~bar
+    hidden = truth & band
+    assert hidden.sum() > 10 and by_shape.bloom_continued_px > 0
+    assert (by_shape.mask & hidden).sum() >= 0.8 * hidden.sum()
+    wedge_water = band & ~truth
+    assert (by_image.mask & wedge_water).sum() >= 8                             # the image's rule fills them
+    assert (by_shape.mask & wedge_water).sum() <= 0.25 * (by_image.mask & wedge_water).sum()
+    assert not (by_shape.mask & bar).any()
