@@ -1091,3 +1091,19 @@ def test_a_fit_stopped_at_its_budget_or_refuted_by_its_check_reports_nothing_as_
     # a check whose full model's cost is 3× the reduced model's, which disagree
     cal.record = TrustRegionRecord(fit_check=Check(np.zeros(4), np.full((2, 5), 1.0), np.full((2, 5), 3.0), False))
     assert "3.00×" in cal.caveats()[0] and not cal.report()["beta2"]["determined"]
+
+
+def test_a_coordinate_fitted_on_its_search_bound_is_not_determined():
+    """At a bound the minimum is the bound's, not the data's: however small its local error, ν
+    fitted at 0.495 (the bound) is not reported as determined; the same ν inside is."""
+    truth = Parameters(0.25, 9000.0, 0.43, 2e5, 0.5)
+    ev = AnalyticEvaluator(truth)
+    inside = ev.space.theta(truth)
+    assert uncertainty(ev, inside).determined["nu"] and not uncertainty(ev, inside).at_bound["nu"]
+    on_bound = inside.copy()
+    on_bound[1] = ev.space.upper[1]
+    unc = uncertainty(ev, on_bound)
+    assert unc.at_bound["nu"] and not unc.determined["nu"]
+    assert unc.std[1] < 0.05                    # small by the errors alone: the bound is what decides
+    assert not any(unc.at_bound[n] for n in ("log_E", "log_beta1", "beta2"))   # only ν is on a bound
+

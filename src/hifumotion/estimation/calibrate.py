@@ -121,6 +121,12 @@ class Calibration:
         for entry in out.values():   # an error no data bound is "unknown", not a number
             if entry["std"] is not None and not np.isfinite(entry["std"]):
                 entry["std"] = None
+        at_bound = {} if self.assessment is None else self.assessment.uncertainty.at_bound
+        for coordinate, entries in _REPORTED_BY.items():
+            if at_bound.get(coordinate):
+                for name in entries:
+                    if name in out:
+                        out[name]["not_determined_because"] = "the fit lies on its search bound"
         if self.caveats():
             for entry in out.values():
                 if entry["determined"]:
@@ -195,6 +201,12 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
                        outcome.table1, outcome.record, outcome.assessment.degeneracy,
                        unc.correlation.round(3).tolist(), outcome.model, search, observation, ev.runs, timings,
                        ev.failed, objective, resolution=resolution, assessment=outcome.assessment)
+
+
+#: the fitted coordinate → the parameters.json entries its value and error give
+_REPORTED_BY = {"log_E": ("youngs_modulus_pa", "force_over_youngs_m2"), "nu": ("poisson_ratio",),
+                "log_beta1": ("beta1_pa_s_pow", "beta1_over_youngs_s_pow"), "beta2": ("beta2",),
+                FRICTION_NAME: ("friction",)}
 
 
 def recovered_parameters(report: dict, k: Parameters, truth: dict) -> dict:

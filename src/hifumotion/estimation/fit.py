@@ -133,6 +133,8 @@ class Uncertainty:
     #: coordinate -> bool: what ``std_independent`` would call determined — which directions the
     #: Jacobian sees sharply, what a Gauss–Newton step may move, not how well they are known
     sharp: dict = field(default_factory=dict)
+    #: coordinate -> bool: the fit lies within half a finite-difference step of its search bound
+    at_bound: dict = field(default_factory=dict)
 
 
 def frame_jackknife_covariance(j: np.ndarray, r: np.ndarray, seen: np.ndarray) -> np.ndarray:
@@ -190,7 +192,11 @@ def uncertainty(ev: Evaluator, theta: np.ndarray, residuals_mm: np.ndarray | Non
     frame's error, and a fit whose model misses the tissue in a way the frames repeat is
     no better known for having more points — the jackknife sees that scatter. A
     coordinate is *determined* when its standard error is below its relevance scale
-    (20 % for ln E, ln β1 and ln μ_f, 0.05 for ν, 0.2 for β2)."""
+    (20 % for ln E, ln β1 and ln μ_f, 0.05 for ν, 0.2 for β2) and the fit does not lie on its
+    search bound (within half a finite-difference step): there the minimum is the bound's, not
+    the data's — the data ask for a value the search may not give — and a local error says
+    nothing of how far off it is (measured: ν on its 0.495 bound, 7σ from the truth by the
+    errors)."""
     j = jacobian(ev, theta) if jacobian_mm is None else np.asarray(jacobian_mm, float)
     r2 = np.asarray(ev.one(theta) if residuals_mm is None else residuals_mm, float)
     r2 = r2.reshape(len(r2), -1)
@@ -219,10 +225,14 @@ def uncertainty(ev: Evaluator, theta: np.ndarray, residuals_mm: np.ndarray | Non
     scale = np.array([RELEVANCE[name] for name in ev.space.names])
     scaled_sv = np.linalg.svd(j * ev.space.steps, compute_uv=False)
     names = ev.space.names
+    half_step = 0.5 * np.asarray(ev.space.steps, float)
+    at = np.asarray(theta, float)
+    bound = (at - np.asarray(ev.space.lower, float) < half_step) | (np.asarray(ev.space.upper, float) - at < half_step)
     return Uncertainty(std, corr, scaled_sv, float(np.sqrt(s2)),
-                       {name: bool(x < sc) for name, x, sc in zip(names, std, scale)},
+                       {name: bool(x < sc and not b) for name, x, sc, b in zip(names, std, scale, bound)},
                        np.sqrt(var_independent), np.sqrt(var_frames),
-                       {name: bool(x < sc) for name, x, sc in zip(names, np.sqrt(var_independent), scale)})
+                       {name: bool(x < sc) for name, x, sc in zip(names, np.sqrt(var_independent), scale)},
+                       {name: bool(b) for name, b in zip(names, bound)})
 
 
 def degeneracy(ev: Evaluator, theta: np.ndarray, factors=(0.5, 2.0)) -> list[dict]:
