@@ -745,6 +745,7 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
             assert reported == pytest.approx(max(independent, frames), rel=1e-9)
     # the observation as it was made: frame 0's target continued into the bar's bloom, as asked
     assert params["observation"]["bloom_continuation"] is True
+    assert params["observation"]["bloom_continued_by"] in ("reconstruction", "image")
     assert (cal / "model" / "scene.toml").is_file() and (cal / "observation" / "tissue.vtp").is_file()
     # the model kept is the one that fits the training frames better, saved with its own parameters
     mapping, model = params["fit"]["strategy"], params["model"]

@@ -180,6 +180,7 @@ def online(
     from hifumotion.io import output_folder, write_json
     from hifumotion.io.files import write_text
     from hifumotion.observed import load_observed, read_initial_contour, read_setup
+    from hifumotion.observed.solids import imaging_plane
     from hifumotion.prediction.online import OnlineSession, watch_frames
     from hifumotion.report.figures import online_figure
     from hifumotion.run_info import RunRecord
@@ -230,10 +231,15 @@ def online(
         with StageBars() as progress:
             with record.stage("reduced model, frame 0"):
                 # frame 0 segmented as the calibration's tracking segmented it
-                continued = bool((meta.get("observation") or {}).get("bloom_continuation", False))
+                seen = meta.get("observation") or {}
+                continued = bool(seen.get("bloom_continuation", False))
+                shape = None
+                if continued and seen.get("bloom_continued_by") == "reconstruction":
+                    plane = imaging_plane(setup)
+                    shape = reference.reconstruction_distance(plane.points_mm())
                 session = OnlineSession.start(spec, k, setup, frame0, initial, ahead,
                                               boundary_offset_mm=boundary_offset, continue_bloom=continued,
-                                              progress=progress)
+                                              bloom_shape_mm=shape, progress=progress)
             with record.stage("online"):
                 due = time.perf_counter()
                 for frame in frames:

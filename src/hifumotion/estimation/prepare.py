@@ -67,6 +67,10 @@ class Observation:
     bloom_continuation
         Whether frame 0's target was given the strip the bar's bloom hides (:func:`prepare`'s
         ``continue_bloom``); the online loop segments frame 0 the same way.
+    bloom_continued_by
+        What decided which of the strip's pixels are target: ``"reconstruction"`` (its top
+        continued under the bar) or ``"image"`` (tissue at the bloom's edge); ``""`` without
+        the continuation.
     """
 
     observed: Observed
@@ -79,6 +83,7 @@ class Observation:
     motion: object | None = None
     bar_cap: object | None = None
     bloom_continuation: bool = False
+    bloom_continued_by: str = ""
 
     @property
     def pixel_mm(self) -> float:
@@ -236,11 +241,10 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     # the tracked ones where given
     # the floor, and the bar's place at rest: pushing along its axis it only moves away from
     # there, into the tissue, so no frame has tissue where the resting bar was
-    motion = None
+    motion, shape = None, None
     if tracking == "speckle":
         from hifumotion.speckle import follow
 
-        shape = None
         if continue_bloom and cap is not None and not cap.skipped:
             from hifumotion.observed.solids import imaging_plane
 
@@ -260,8 +264,9 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     source = str(contours_csv) if given else tracking
     tell("track frames", 1.0)
     timings["track_s"] = time.perf_counter() - t2
-    return Observation(observed, sweep, rec, offset, masks, source, timings, motion, cap,
-                       continue_bloom and motion is not None)
+    continued = continue_bloom and motion is not None
+    return Observation(observed, sweep, rec, offset, masks, source, timings, motion, cap, continued,
+                       ("reconstruction" if shape is not None else "image") if continued else "")
 
 
 __all__ = ["Observation", "frame_solids", "known_solid_mask", "prepare", "read_user_contours"]

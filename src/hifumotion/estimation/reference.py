@@ -63,5 +63,13 @@ class ReferenceShape:
     def inside(self, points_mm: np.ndarray) -> np.ndarray:
         return self.distance(points_mm) > 0
 
+    def reconstruction_distance(self, points_mm: np.ndarray) -> np.ndarray | None:
+        """The reconstruction's own signed distance (mm, positive inside) at ``points_mm``
+        ``(..., 3)`` (tank frame), without the frame-0 contour; ``None`` without a reconstruction."""
+        if self.rec_distance_mm is None:
+            return None
+        p = np.asarray(points_mm, float)
+        return self._rec(p.reshape(-1, 3)).reshape(p.shape[:-1])
+
 
 __all__ = ["ReferenceShape"]

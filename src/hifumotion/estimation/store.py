@@ -137,6 +137,7 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
         },
         "observation": {"contours": obs.contour_source, "sweep_planes_with_tissue": int(obs.sweep.present.sum()),
                         "bloom_continuation": obs.bloom_continuation,
+                        "bloom_continued_by": obs.bloom_continued_by,
                         "reconstructed_volume_mm3": rec.volume_mm3, "notes": obs.sweep.notes + rec.notes},
         "timings_s": {**obs.timings_s, **cal.timings_s},
         **(extra or {}),

@@ -299,12 +299,14 @@ class OnlineSession:
 
     @classmethod
     def start(cls, spec, k, setup, frame0: np.ndarray, initial_contour, horizons_frames, *,
-              boundary_offset_mm: float = 0.0, continue_bloom: bool = False, **options) -> "OnlineSession":
+              boundary_offset_mm: float = 0.0, continue_bloom: bool = False,
+              bloom_shape_mm: np.ndarray | None = None, **options) -> "OnlineSession":
         """A session from what a scanner gives before the push: frame 0 and the clinician's
         contour on it (``initial_contour``, anything :func:`~hifumotion.segmentation.segment`
         takes). Frame 0's target is segmented as the calibration's tracking segments it (GLCV,
         the known solids out, moved inwards by ``boundary_offset_mm``, the bar's bloom continued
-        where ``continue_bloom``); ``options`` are the constructor's."""
+        where ``continue_bloom``, by ``bloom_shape_mm`` where the calibration's reconstruction
+        decided it: :func:`~hifumotion.speckle.segment_target`); ``options`` are the constructor's."""
         from hifumotion.observed.solids import check_bar_in_image, imaging_plane, known_solids
         from hifumotion.speckle import segment_target
         from hifumotion.speckle.displacement import unit_frames
@@ -316,7 +318,8 @@ class OnlineSession:
         solids = known_solids(imaging_plane(setup), setup)
         check_bar_in_image(frame0, solids, "setup.json")
         first = segment_target(unit_frames(frame0[None])[0], initial_contour, setup.pixel_mm, solids=solids,
-                               boundary_offset_mm=boundary_offset_mm, continue_bloom=continue_bloom)
+                               boundary_offset_mm=boundary_offset_mm, continue_bloom=continue_bloom,
+                               bloom_shape_mm=bloom_shape_mm)
         return cls(spec, k, setup, frame0, first.mask, horizons_frames, **options)
 
     @property
