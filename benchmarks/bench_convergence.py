@@ -39,7 +39,8 @@ def one_implicit(factor: float, preset: str, seed: int) -> dict:
     import numpy as np
 
     from hifumotion.creep.scene import simulate_creep
-    from hifumotion.creep.voxels import conform, voxel_mesh
+    from hifumotion.creep.conform import conform
+    from hifumotion.creep.voxels import voxel_mesh
     from hifumotion.experiment import twin_config
     from hifumotion.experiment.blob import Blob
     from hifumotion.experiment.twin import _seeds, resolution, truth_scene

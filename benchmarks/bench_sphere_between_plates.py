@@ -23,7 +23,7 @@ def main() -> None:
     import trimesh
 
     from hifumotion.creep import CreepMaterial, CreepSolver, ContactPlane, Punch, Surroundings, voxel_mesh
-    from hifumotion.creep.voxels import conform
+    from hifumotion.creep.conform import conform
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--radius-mm", type=float, default=6.0)

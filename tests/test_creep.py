@@ -92,7 +92,7 @@ def test_conformed_voxels_lie_on_a_lumpy_surface(seed):
     import trimesh
 
     from hifumotion.creep.hexahedra import general_blocks
-    from hifumotion.creep.voxels import conform
+    from hifumotion.creep.conform import conform
     from hifumotion.experiment.blob import Blob
 
     dx = 2.0
@@ -122,7 +122,7 @@ def test_a_voxel_that_conforming_would_flatten_is_moved_half_as_far_not_a_crash(
     import trimesh
 
     from hifumotion.creep.hexahedra import general_blocks
-    from hifumotion.creep.voxels import conform
+    from hifumotion.creep.conform import conform
 
     mesh = voxel_mesh(np.array([[0.5, 0.5, 0.5]]), 1.0)
     flat = np.array([[-1.0, 0.5, -1.0], [2.0, 0.5, -1.0], [2.0, 0.5, 2.0], [-1.0, 0.5, 2.0]])

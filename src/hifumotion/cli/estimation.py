@@ -36,7 +36,8 @@ def calibrate(
     from hifumotion.config import apply_settings, validate_config
     from hifumotion.console import StageBars
     from hifumotion.estimation.calibrate import OBJECTIVES
-    from hifumotion.estimation.evaluator import check_search_log, scheduler_address_problem
+    from hifumotion.estimation.evaluator import check_search_log
+    from hifumotion.estimation.settings import scheduler_address_problem
     from hifumotion.estimation.protocol import default_frames, parse_frames
     from hifumotion.io import output_folder
     from hifumotion.observed import load_observed

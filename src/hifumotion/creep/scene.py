@@ -19,7 +19,8 @@ import numpy as np
 
 from hifumotion.creep.contact import ContactPlane, Punch
 from hifumotion.creep.integrate import CreepMaterial, CreepResult, CreepSettings, CreepSolver, Surroundings
-from hifumotion.creep.voxels import conform, voxel_mesh
+from hifumotion.creep.conform import conform
+from hifumotion.creep.voxels import voxel_mesh
 from hifumotion.particles.scene import Scene, tissue_particles_mm, touching_tip
 from hifumotion.particles.simulate import SimulationResult
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from hifumotion.console import log
 from hifumotion.errors import CalibrationFailed, InputError, brief
+from hifumotion.estimation.settings import scheduler_address_problem
 from hifumotion.estimation.model import ModelSpec, Parameters, forward_model, run_model
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
 from hifumotion.estimation.space import SearchSpace
@@ -93,19 +94,6 @@ def snapshot_task(spec: ModelSpec, scene, threads: int | None = 1):
 
 #: Residual (mm) given to a failed run at each point, so an estimator steps away from it.
 FAILED_RESIDUAL_MM = 10.0
-
-
-def scheduler_address_problem(address: str) -> str | None:
-    """Why ``address`` is not a Dask scheduler's address (``tcp://host:8786``, ``tls://…``,
-    ``host:8786``), or None when it is one."""
-    import re
-
-    m = re.fullmatch(r"(?:(tcp|tls|ucx|ws|wss)://)?(\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})", address.strip())
-    if m is None:
-        return f"expected a scheduler address such as tcp://host:8786, got {address[:60]!r}"
-    if not 0 < int(m.group(3)) < 65536:
-        return f"port {m.group(3)} is not in 1 … 65535"
-    return None
 
 
 def check_search_log(path: str | Path) -> Path:

@@ -89,7 +89,9 @@ class ModelSpec:
         if self._voxels is None:
             import trimesh
 
-            from hifumotion.creep.voxels import conform, voxel_mesh
+            from hifumotion.creep.conform import conform
+
+            from hifumotion.creep.voxels import voxel_mesh
 
             mesh = voxel_mesh(self.tissue_mm, self.spacing_mm)
             if self.surface_vertices_mm is not None:

@@ -33,6 +33,19 @@ from hifumotion.rheology import RATE_FLOOR_PER_S
 INTEGRATORS = ("implicit", "explicit", "reduced")
 
 
+def scheduler_address_problem(address: str) -> str | None:
+    """Why ``address`` is not a Dask scheduler's address (``tcp://host:8786``, ``tls://…``,
+    ``host:8786``), or None when it is one."""
+    import re
+
+    m = re.fullmatch(r"(?:(tcp|tls|ucx|ws|wss)://)?(\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})", address.strip())
+    if m is None:
+        return f"expected a scheduler address such as tcp://host:8786, got {address[:60]!r}"
+    if not 0 < int(m.group(3)) < 65536:
+        return f"port {m.group(3)} is not in 1 … 65535"
+    return None
+
+
 @dataclass
 class ModelSettings:
     """Numerical settings of the fitted model (not fitted themselves)."""
@@ -149,12 +162,10 @@ class CalibrationSettings(ConfigModel):
     @field_validator("scheduler_address")
     @classmethod
     def _an_address(cls, v):
-        from hifumotion.estimation.evaluator import scheduler_address_problem
-
         problem = None if v is None else scheduler_address_problem(v)
         if problem:
             raise ValueError(problem)
         return v
 
 
-__all__ = ["INTEGRATORS", "CalibrationSettings", "ModelSettings"]
+__all__ = ["INTEGRATORS", "CalibrationSettings", "ModelSettings", "scheduler_address_problem"]
