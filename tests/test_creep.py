@@ -669,7 +669,7 @@ def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snaps
     # squashed, so the contact set grows. The modes come from full runs at half and twice
     # the push; the reduced run at a push between must keep to the full run's motion (3 % of
     # it) and off the floor.
-    from hifumotion.creep.scene import creep_solver, output_times, scene_material, scene_punch, simulate_creep, tissue_mesh
+    from hifumotion.creep.scene import creep_solver, output_times, scene_material, scene_punch, snapshot_run, tissue_mesh
     from hifumotion.particles.scene import Scene
 
     def scene_at(f):
@@ -680,12 +680,9 @@ def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snaps
             "run": {"duration_s": 6.0, "output_interval_s": 0.1, "write_vtu": False}})
 
     mesh, vol = tissue_mesh(scene_at(1.0))
-    snapshots = []
-    for f in (0.5, 2.0):
-        simulate_creep(scene_at(f), mesh=mesh, tissue_particles=(mesh.centres_mm, vol), keep=snapshots)
+    snapshots = [snapshot_run(scene_at(f), mesh, vol) for f in (0.5, 2.0)]
     scene = scene_at(scale)
-    truth = []
-    simulate_creep(scene, mesh=mesh, tissue_particles=(mesh.centres_mm, vol), keep=truth)
+    truth = [snapshot_run(scene, mesh, vol)]
     punch, _ = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
     moved = truth[0].particles_mm - truth[0].particles_mm[:1]
     motion = np.sqrt(np.mean(np.sum(moved ** 2, axis=-1), axis=1))

@@ -147,28 +147,20 @@ def simulation_result(scene: Scene, mesh, vol_mm3: np.ndarray, result: CreepResu
 
 def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Callable[[float], None] | None = None,
                    tissue_particles: tuple[np.ndarray, np.ndarray] | None = None,
-                   settings: CreepSettings | None = None, surface=None, mesh=None,
-                   keep: list | None = None) -> SimulationResult:
+                   settings: CreepSettings | None = None, surface=None, mesh=None) -> SimulationResult:
     """Run ``scene`` on the fast path: settled state at t = 0, then the push (module docstring).
 
     ``surface`` (a closed ``trimesh.Trimesh``, mm) is the tissue's true surface, onto which
     the voxels' boundary nodes are moved (default: the scene's ellipsoid or box; none for
     particles from a CSV or memory); ``mesh`` a :class:`~.voxels.VoxelMesh` made before
     (a fit's many runs). ``folder``, if given and ``run.write_vtu``, receives the frames as VTU + PVD.
-    ``keep``, a list, receives the run's :class:`~.integrate.CreepResult` (its nodes: the
-    reduced model's snapshots).
     """
-    dx = scene.particles.spacing_mm
     if mesh is None:
         mesh, vol_mm3 = tissue_mesh(scene, tissue_particles, surface)
     else:
         vol_mm3 = (np.asarray(tissue_particles[1], float) if tissue_particles is not None
-                   else np.full(len(mesh.centres_mm), dx ** 3))
-    solver, axis = creep_solver(scene, mesh, settings)
-    result = solver.run(output_times(scene), progress)
-    if keep is not None:
-        keep.append(result)
-    sim = simulation_result(scene, mesh, vol_mm3, result, bar_centres(scene, solver.punch, axis, result), "implicit")
+                   else np.full(len(mesh.centres_mm), scene.particles.spacing_mm ** 3))
+    sim, result = run_creep(scene, mesh, vol_mm3, settings, progress)
     if folder is not None and scene.run.write_vtu:
         from hifumotion.creep.output import write_frames
 
@@ -176,14 +168,22 @@ def simulate_creep(scene: Scene, folder: str | Path | None = None, progress: Cal
     return sim
 
 
+def run_creep(scene: Scene, mesh, tissue_volume_mm3: np.ndarray, settings: CreepSettings | None = None,
+              progress: Callable[[float], None] | None = None) -> tuple[SimulationResult, CreepResult]:
+    """Run ``scene`` on the voxel mesh ``mesh``: the result as the explicit path's, and the
+    solver's own :class:`~.integrate.CreepResult` (its nodes: a reduced model's snapshots)."""
+    solver, axis = creep_solver(scene, mesh, settings)
+    result = solver.run(output_times(scene), progress)
+    sim = simulation_result(scene, mesh, np.asarray(tissue_volume_mm3, float), result,
+                            bar_centres(scene, solver.punch, axis, result), "implicit")
+    return sim, result
+
+
 def snapshot_run(scene: Scene, mesh, tissue_volume_mm3: np.ndarray, creep: CreepSettings | None = None,
                  progress: Callable[[float], None] | None = None) -> CreepResult:
     """One full run of ``scene`` on the mesh ``mesh``, its nodes kept: a reduced model's snapshots
     (one such run is a task of its own: a model's several runs may go to several cores)."""
-    runs: list[CreepResult] = []
-    simulate_creep(scene, tissue_particles=(mesh.centres_mm, tissue_volume_mm3), mesh=mesh, keep=runs,
-                   progress=progress, settings=creep)
-    return runs[0]
+    return run_creep(scene, mesh, tissue_volume_mm3, creep, progress)[1]
 
 
-__all__ = ["simulate_creep", "snapshot_run", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]
+__all__ = ["simulate_creep", "run_creep", "snapshot_run", "creep_solver", "output_times", "bar_centres", "simulation_result", "tissue_mesh", "tissue_surface", "tank_planes", "scene_punch", "scene_material"]

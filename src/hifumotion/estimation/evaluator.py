@@ -30,7 +30,7 @@ import numpy as np
 from hifumotion.console import log
 from hifumotion.errors import CalibrationFailed, InputError, brief
 from hifumotion.estimation.settings import scheduler_address_problem
-from hifumotion.estimation.model import ModelSpec, Parameters, forward_model, run_model
+from hifumotion.estimation.model import ModelSpec, Parameters, forward_model, run_model, run_snapshot
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
 from hifumotion.estimation.space import SearchSpace
 
@@ -78,10 +78,9 @@ def full_run_task(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int,
     """One run of the full model (a Dask task) whose nodes are kept: the residuals (mm) of the
     first ``upto`` training frames, and the run as a reduced model's snapshot (``"snapshot"``)."""
     _use_threads(threads)
-    snapshots: list = []
-    run = run_model(spec, k, int(data.frames[upto - 1]), full=True, snapshots=snapshots)
+    run, snapshot = run_snapshot(spec, k, int(data.frames[upto - 1]))
     r = residuals_mm(run.points_mm, data, upto, run.bar_centre_mm)
-    return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps, "snapshot": snapshots[0]}
+    return {"residuals_mm": r, "seconds": run.seconds, "steps": run.steps, "snapshot": snapshot}
 
 
 def snapshot_task(spec: ModelSpec, scene, threads: int | None = 1):

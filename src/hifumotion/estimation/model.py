@@ -294,13 +294,16 @@ class ForwardModel:
         return FORWARD_MODELS[self.reduces] if self.reduces is not None else self
 
 
-def _implicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int, keep: list | None = None):
-    """The fast path (:mod:`hifumotion.creep`) with ``settings.creep`` (``keep``: its
-    :class:`~hifumotion.creep.integrate.CreepResult`, nodes and all, appended there)."""
-    from hifumotion.creep.scene import simulate_creep
+def _implicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
+    """The fast path (:mod:`hifumotion.creep`) with ``settings.creep``."""
+    return _implicit_with_nodes(spec, scene)[0]
 
-    return simulate_creep(scene, tissue_particles=(spec.tissue_mm, spec.tissue_volume_mm3), mesh=spec.voxels(),
-                          settings=spec.settings.creep, keep=keep)
+
+def _implicit_with_nodes(spec: ModelSpec, scene: Scene):
+    """The fast path's run and its :class:`~hifumotion.creep.integrate.CreepResult` (nodes and all)."""
+    from hifumotion.creep.scene import run_creep
+
+    return run_creep(scene, spec.voxels(), spec.tissue_volume_mm3, spec.settings.creep)
 
 
 def _explicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
@@ -352,38 +355,50 @@ def forward_model(spec_or_integrator) -> ForwardModel:
     return FORWARD_MODELS[name]
 
 
-def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), full: bool = False,
-              snapshots: list | None = None) -> ModelRun:
+def run_model(spec: ModelSpec, k: Parameters, last_frame: int, keep_frames=(), full: bool = False) -> ModelRun:
     """Simulate frames 0 … ``last_frame`` with ``k``; the points A at every frame.
 
     ``keep_frames``: frames whose tissue particles are returned as well (for masks).
     ``full``: run the full model the spec's integrator reduces (:attr:`ForwardModel.full`; the
-    spec's own when it is a full one). ``snapshots``: a list to which that full run appends its
-    nodes' motion (a reduced model's snapshot, :func:`~hifumotion.reduced.build.reduced_from_runs`;
-    only the fast path keeps them, so it implies ``full`` and the implicit integrator).
+    spec's own when it is a full one).
     Raises :class:`~hifumotion.errors.InputError` for parameters outside the model's
     validity (ν ≥ 0.5, E ≤ 0 …).
     """
-    from hifumotion.particles.section import material_displacement
+    _check_range(k)
+    t0 = time.perf_counter()
+    model = forward_model(spec)
+    sim = (model.full if full else model)(spec, scene_for(spec, k, last_frame), k, last_frame)
+    return _model_run(spec, k, sim, keep_frames, t0)
 
+
+def run_snapshot(spec: ModelSpec, k: Parameters, last_frame: int):
+    """A run of the fast path (the full model a reduced one is made from) at ``k`` to
+    ``last_frame``: ``(its ModelRun, its CreepResult)`` — the second a reduced model's snapshot
+    (:func:`~hifumotion.reduced.build.reduced_from_runs`)."""
+    _check_range(k)
+    t0 = time.perf_counter()
+    sim, nodes = _implicit_with_nodes(spec, scene_for(spec, k, last_frame))
+    return _model_run(spec, k, sim, (), t0), nodes
+
+
+def _check_range(k: Parameters) -> None:
     if not (k.youngs_modulus_pa > 0 and -1 < k.poisson_ratio < 0.5 and k.beta1 >= 0):
         raise InputError(f"parameters outside the model's range: {k}", "parameters")
-    t0 = time.perf_counter()
-    scene = scene_for(spec, k, last_frame)
-    if snapshots is not None:
-        sim = _implicit(spec, scene, k, last_frame, keep=snapshots)
-    else:
-        model = forward_model(spec)
-        sim = (model.full if full else model)(spec, scene, k, last_frame)
+
+
+def _model_run(spec: ModelSpec, k: Parameters, sim, keep_frames, started: float) -> ModelRun:
+    """A run's :class:`ModelRun`: the points A followed as material points (with the particles
+    near them at frame 0), the kept frames' particles."""
+    from hifumotion.particles.section import material_displacement
+
     rest = sim.tissue_mm[0]
     frames = np.arange(len(sim.times_s))
-    # the points A are material points: followed with the particles near them at frame 0
     u, _ = material_displacement(spec.points_mm, sim.tissue_mm, rest, spec.spacing_mm)
-    points = spec.points_mm + u
     kept = {int(f): sim.tissue_mm[f].copy() for f in keep_frames if 0 <= f < len(frames)}
-    return ModelRun(k, frames, points, rest, kept, sim.bar_centre_mm, sim.steps, time.perf_counter() - t0)
+    return ModelRun(k, frames, spec.points_mm + u, rest, kept, sim.bar_centre_mm, sim.steps,
+                    time.perf_counter() - started)
 
 
 __all__ = ["Parameters", "ModelSettings", "ModelSpec", "KeptReduced", "ModelRun", "ForwardModel", "FORWARD_MODELS", "forward_model",
            "model_spec",
-           "scene_for", "run_model"]
+           "scene_for", "run_model", "run_snapshot"]

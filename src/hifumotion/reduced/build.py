@@ -45,7 +45,7 @@ def reduced_creep(scenes: list[Scene], mesh, tissue_volume_mm3: np.ndarray, sett
 
 
 def simulate_reduced(scene: Scene, reduced, tissue_volume_mm3: np.ndarray,
-                     progress: Callable[[float], None] | None = None, keep: list | None = None) -> SimulationResult:
+                     progress: Callable[[float], None] | None = None) -> SimulationResult:
     """Run ``scene`` on the reduced model ``reduced`` (:func:`reduced_creep`, made for this
     scene's tissue and mesh): its material, its bar's force schedule and its friction; the
     result as :func:`simulate_creep`'s."""
@@ -53,10 +53,8 @@ def simulate_reduced(scene: Scene, reduced, tissue_volume_mm3: np.ndarray,
     punch, axis = scene_punch(scene, mesh.centres_mm, scene.particles.spacing_mm)
     force, breaks = (punch.force_n, punch.breakpoints_s) if punch is not None else ((lambda t: 0.0), ())
     travel = punch.travel_m if punch is not None else None
-    result = reduced.run(scene_material(scene), force, breaks, output_times(scene), progress, nodes=keep is not None,
+    result = reduced.run(scene_material(scene), force, breaks, output_times(scene), progress,
                          travel_m=travel, friction=scene.physics.friction)
-    if keep is not None:
-        keep.append(result)
     return simulation_result(scene, mesh, np.asarray(tissue_volume_mm3, float), result,
                              bar_centres(scene, punch, axis, result), "reduced")
 
