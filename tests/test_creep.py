@@ -1129,3 +1129,30 @@ def test_the_reduced_model_refuses_a_neo_hookean_solver_by_name():
                          [ContactPlane((0, 0, 0), (0, 1, 0))], None, CreepSettings(kinematics="neo_hooke"))
     with pytest.raises(InputError, match="kinematics"):
         ReducedCreep(solver, None)
+
+
+def test_another_pardiso_call_in_the_process_leaves_a_pressed_blocks_contacts_as_they_are():
+    """A PARDISO solve through pypardiso's own wrapper (as the finite-element references make)
+    moves the fast path's single-precision factor's solutions in their 7th digit; the pressed
+    neo-Hookean block must still reach its analytic stretch — no contact released by a pull
+    smaller than the round's solve resolves."""
+    import pypardiso
+    import scipy.sparse as sp
+    from scipy.optimize import fsolve
+
+    a = sp.random(50, 50, density=0.2, random_state=0)
+    a = (a + a.T) + 10 * sp.eye(50)
+    pypardiso.PyPardisoSolver(mtype=2).solve(sp.triu(a).tocsr(), np.ones(50))
+    n, e, nu, force = 5, 8e3, 0.3, 0.06
+    mu, kappa = e / (2 * (1 + nu)), e / (3 * (1 - 2 * nu))
+
+    def stresses(stretch):
+        axial, lateral = stretch
+        j, i1 = axial * lateral ** 2, axial ** 2 + 2 * lateral ** 2
+        c = mu * j ** (-2 / 3)
+        return [c * (axial - i1 / (3 * axial)) + kappa * (j - 1) * j / axial + force / (n * MM) ** 2,
+                c * (lateral - i1 / (3 * lateral)) + kappa * (j - 1) * j / lateral]
+
+    axial, _ = fsolve(stresses, [0.8, 1.05], xtol=1e-14)
+    _, r = pressed_block(n, e, nu, force, settings=CreepSettings(kinematics="neo_hooke", precision="mixed"))
+    assert r.advance_mm[-1] == pytest.approx((1 - axial) * n, rel=1e-4)

@@ -520,7 +520,7 @@ class CreepSolver:
             # the constraints' reactions: their normal parts set the friction's μ_f λ_n
             reaction = (a @ new - base).reshape(-1, 3)
             unew = new.reshape(-1, 3)
-            changed = cs.update(unew, reaction, self.advance_m, tol, LEFT_TOLERANCE * self.dx_m)
+            changed = cs.update(unew, reaction, self.advance_m, tol, LEFT_TOLERANCE * self.dx_m, self.settings.round_rtol)
             if self.punch is not None and force > 0 and not np.any(cs.body == cs.punch_index):
                 self._engage_punch(unew, force)
                 changed = True
@@ -535,7 +535,7 @@ class CreepSolver:
                 # contacts, as a round-bottomed sample on two floor nodes) can move far between
                 # the round's looser solve and this one, and take nodes through a surface
                 new, unew, reaction = self._polished(a, base, unloaded)
-                if not cs.update(unew, reaction, self.advance_m, tol, LEFT_TOLERANCE * self.dx_m):
+                if not cs.update(unew, reaction, self.advance_m, tol, LEFT_TOLERANCE * self.dx_m, self.settings.round_rtol):
                     break
                 self.stats["polish_rounds"] += 1
                 guess = new
