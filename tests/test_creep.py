@@ -1093,12 +1093,11 @@ def test_the_neo_hookean_force_is_its_energys_gradient_its_tangent_the_small_str
     assert np.abs(law.forces(turned)).max() < 1e-12 * np.abs(k @ turned.ravel()).max()
 
 
-def test_a_block_pressed_by_a_quarter_takes_the_neo_hookean_stretches():
-    # frictionless floor and punch: a homogeneous uniaxial state whose nominal stress is F/A₀ along
-    # the axis and nothing across it, solved here from W's stress; the linear model's 30 % is not it
+def _neo_hookean_uniaxial_stretches(n, e, nu, force):
+    """A frictionless floor and punch: a homogeneous uniaxial state whose nominal stress is F/A₀
+    along the axis and nothing across it, solved here from W's stress: (axial, lateral)."""
     from scipy.optimize import fsolve
 
-    n, e, nu, force = 5, 8e3, 0.3, 0.06
     mu, kappa = e / (2 * (1 + nu)), e / (3 * (1 - 2 * nu))
 
     def stresses(stretch):
@@ -1108,7 +1107,13 @@ def test_a_block_pressed_by_a_quarter_takes_the_neo_hookean_stretches():
         return [c * (axial - i1 / (3 * axial)) + kappa * (j - 1) * j / axial + force / (n * MM) ** 2,
                 c * (lateral - i1 / (3 * lateral)) + kappa * (j - 1) * j / lateral]
 
-    axial, lateral = fsolve(stresses, [0.8, 1.05], xtol=1e-14)
+    return fsolve(stresses, [0.8, 1.05], xtol=1e-14)
+
+
+def test_a_block_pressed_by_a_quarter_takes_the_neo_hookean_stretches():
+    # the analytic uniaxial state (_neo_hookean_uniaxial_stretches); the linear model's 30 % is not it
+    n, e, nu, force = 5, 8e3, 0.3, 0.06
+    axial, lateral = _neo_hookean_uniaxial_stretches(n, e, nu, force)
     assert 0.75 < axial < 0.8
     mesh, r = pressed_block(n, e, nu, force, settings=CreepSettings(kinematics="neo_hooke"))
     assert r.advance_mm[-1] == pytest.approx((1 - axial) * n, rel=1e-4)
@@ -1138,21 +1143,11 @@ def test_another_pardiso_call_in_the_process_leaves_a_pressed_blocks_contacts_as
     smaller than the round's solve resolves."""
     import pypardiso
     import scipy.sparse as sp
-    from scipy.optimize import fsolve
 
     a = sp.random(50, 50, density=0.2, random_state=0)
     a = (a + a.T) + 10 * sp.eye(50)
     pypardiso.PyPardisoSolver(mtype=2).solve(sp.triu(a).tocsr(), np.ones(50))
     n, e, nu, force = 5, 8e3, 0.3, 0.06
-    mu, kappa = e / (2 * (1 + nu)), e / (3 * (1 - 2 * nu))
-
-    def stresses(stretch):
-        axial, lateral = stretch
-        j, i1 = axial * lateral ** 2, axial ** 2 + 2 * lateral ** 2
-        c = mu * j ** (-2 / 3)
-        return [c * (axial - i1 / (3 * axial)) + kappa * (j - 1) * j / axial + force / (n * MM) ** 2,
-                c * (lateral - i1 / (3 * lateral)) + kappa * (j - 1) * j / lateral]
-
-    axial, _ = fsolve(stresses, [0.8, 1.05], xtol=1e-14)
+    axial, _ = _neo_hookean_uniaxial_stretches(n, e, nu, force)
     _, r = pressed_block(n, e, nu, force, settings=CreepSettings(kinematics="neo_hooke", precision="mixed"))
     assert r.advance_mm[-1] == pytest.approx((1 - axial) * n, rel=1e-4)
