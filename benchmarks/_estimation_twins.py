@@ -67,7 +67,7 @@ CASES: dict[str, tuple[str, dict]] = {
 #: millimetres in the validation window, and whose motion changes after the training frames —
 #: the drive stops within the window, unannounced to a filter that only sees the frames (a
 #: slide at a steady rate to the end is the constant-velocity Kalman filter's own case,
-#: docs/decisions.md); not in the default run (each twin takes ~15–50 min to make). Issue 41 asks
+#: docs/decisions.md); not in the default run (each twin takes ~15–50 min to make). The targets ask
 #: for three twins that move ≥ 2 mm in the validation window: s47 moves 1.92 mm (at full
 #: resolution; its coarse probe gave 2.42), so s50 — another seed, shape, material and bar — is the
 #: third (2.62 mm), and s47 stays as a witness

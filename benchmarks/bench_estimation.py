@@ -1,4 +1,4 @@
-"""Issue 19's benchmark: calibrate, predict and aim on twins nobody tuned to; every peer beside it.
+"""The estimation benchmark: calibrate, predict and aim on twins nobody tuned to; every peer beside it.
 
 On each twin of ``_estimation_twins.CASES`` (one per therapy protocol — paper,
 slow_push, push_release, oblique — each with its own seed, shape, bar, material and
@@ -40,7 +40,7 @@ Usage (run it alone: parallel jobs slow each other's timings)::
 (``CalibrationSettings.search_integrator``: the search model's reduced model or its full
 runs; ``--peer-set`` gives the peer's settings whole) and reports the reduced search's calibration
 targets: ≤ 30 s, and a validation DSC within 0.001 and a centroid within 0.01 mm of the
-implicit search's fit. Issue 39's comparison is against today's default calibration::
+implicit search's fit. The comparison is against the default calibration::
 
     python benchmarks/bench_estimation.py --methods least_squares --compare-search \
         --set search_integrator=reduced,particles=1000 --peer-set search_integrator=implicit
@@ -197,7 +197,7 @@ def ncc_validation(observed, obs, truth, valid) -> dict:
 
 
 def targets(protocol: str, r: dict) -> dict:
-    """Issue 19's targets on one twin and method, each true or false."""
+    """The estimation targets on one twin and method, each true or false."""
     v, b = r["physics"]["validation"], r["baselines_validation"]
     hold, kal = b["no_motion"], b["kalman"]
     rec = r["recovered"]

@@ -1,4 +1,4 @@
-"""Issue 39's benchmark, first part: the reduced forward model against the implicit path, in one run.
+"""The online benchmark, first part: the reduced forward model against the implicit path, in one run.
 
 On each twin of ``_estimation_twins.CASES`` (or ``--twin DIR``), the observation
 ``bench_estimation`` fits (GLCV sweep, speckle-tracked frames, the boundary offset

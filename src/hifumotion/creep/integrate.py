@@ -564,27 +564,7 @@ class CreepSolver:
         n = len(self.rest_m)
         st = self.settings
         cs = self.contacts
-        self._rest_advance = None
-        # resting: the nodes on a surface start touching it, anchored where they are
-        gap, which = cs.gaps(np.zeros((n, 3)), 0.0)
-        resting = np.flatnonzero((which >= 0) & (which < cs.punch_index) & (gap <= st.contact_tolerance * self.dx_m))
-        cs.touch(resting, which[resting], np.zeros((n, 3)))
-        # settled state: the tissue let down onto the floor by quiet steps of growing length
-        # (each from rest: inertia keeps a body that touches at a point well posed until its
-        # contact patch has formed), then static equilibrium under gravity, no viscosity
-        u = np.zeros((n, 3))
-        for dt_settle in SETTLE_STEPS_S:
-            u, _ = self.step(u, np.zeros((n, 3)), 0.0, dt_settle, None)
-        if self.punch is not None:
-            # the bar starts resting on the tissue (a gap would be crossed in no time by a
-            # quasi-static push, and its travel counted as motion)
-            gap, which = cs.gaps(u, self.advance_m)
-            under = which == cs.punch_index
-            if under.any():
-                self.advance_m += float(gap[under].min())
-            if self.punch.driven:
-                self._rest_advance = self.advance_m
-                cs.version += 1   # the bar's nodes now take its advance, not an unknown of their own
+        u = self._settle()
         v = np.zeros((n, 3))
         t = 0.0
         interval = float(np.median(np.diff(times))) if len(times) > 1 else max(times[0], 1.0)
@@ -637,8 +617,43 @@ class CreepSolver:
         if self._factor is not None:
             self._factor.release()
             self._factor = None
-        st_t = np.array(saved_t)
-        st_u = np.array(saved_u)
+        result = self._sampled(times, np.array(saved_t), np.array(saved_u), saved_adv, saved_force)
+        self.stats["seconds"] = time.perf_counter() - started
+        result.stats = dict(self.stats)
+        return result
+
+    def _settle(self) -> np.ndarray:
+        """The settled displacement (m): the tissue at rest on its supports, the bar resting on it."""
+        n = len(self.rest_m)
+        st, cs = self.settings, self.contacts
+        self._rest_advance = None
+        # resting: the nodes on a surface start touching it, anchored where they are
+        gap, which = cs.gaps(np.zeros((n, 3)), 0.0)
+        resting = np.flatnonzero((which >= 0) & (which < cs.punch_index) & (gap <= st.contact_tolerance * self.dx_m))
+        cs.touch(resting, which[resting], np.zeros((n, 3)))
+        # settled state: the tissue let down onto the floor by quiet steps of growing length
+        # (each from rest: inertia keeps a body that touches at a point well posed until its
+        # contact patch has formed), then static equilibrium under gravity, no viscosity
+        u = np.zeros((n, 3))
+        for dt_settle in SETTLE_STEPS_S:
+            u, _ = self.step(u, np.zeros((n, 3)), 0.0, dt_settle, None)
+        if self.punch is not None:
+            # the bar starts resting on the tissue (a gap would be crossed in no time by a
+            # quasi-static push, and its travel counted as motion)
+            gap, which = cs.gaps(u, self.advance_m)
+            under = which == cs.punch_index
+            if under.any():
+                self.advance_m += float(gap[under].min())
+            if self.punch.driven:
+                self._rest_advance = self.advance_m
+                cs.version += 1   # the bar's nodes now take its advance, not an unknown of their own
+        return u
+
+    def _sampled(self, times: np.ndarray, st_t: np.ndarray, st_u: np.ndarray, saved_adv: list, saved_force: list
+                 ) -> CreepResult:
+        """The accepted steps (times ``st_t`` s, displacements ``st_u`` m) interpolated linearly to
+        the output times, in mm."""
+        n = len(self.rest_m)
         nodes = np.empty((len(times), n, 3))
         for k, tk in enumerate(times):
             j = int(np.clip(np.searchsorted(st_t, tk), 1, len(st_t) - 1))
@@ -648,7 +663,6 @@ class CreepSolver:
         nodes_mm = nodes / MM
         advance = np.interp(times, st_t, np.array(saved_adv) - saved_adv[0]) / MM
         force = np.interp(times, st_t, np.array(saved_force))
-        self.stats["seconds"] = time.perf_counter() - started
         self.stats["advance_at_rest_mm"] = saved_adv[0] / MM
         parts = np.stack([self.mesh.particles(f) for f in nodes_mm])
         return CreepResult(times, nodes_mm, parts, advance, force, dict(self.stats))

@@ -138,41 +138,15 @@ class Calibration:
 def calibrate(observation: Observation, settings: CalibrationSettings | None = None,
               log_path: str | Path | None = None, progress: Callable[[str, float], None] | None = None
               ) -> Calibration:
-    """Steps 2–6 of the module docstring on a prepared observation: the training data and the
+    """Steps 2–4 of the module docstring on a prepared observation: the training data and the
     models, then the strategy (:func:`~.strategies.strategy_for`) on the search model's
     evaluator, then the uncertainty it assessed and the resolution check."""
     s = settings or CalibrationSettings()
     tell = progress or (lambda stage, fraction: None)
     timings: dict[str, float] = {}
-    n_frames = len(observation.frame_masks)
-    frames = parse_frames(s.training_frames, n_frames, "training_frames") or default_frames(n_frames)[0]
-    data = TrainingData.from_masks(observation.frame_masks, frames, observation.frame_plane)
     t0 = time.perf_counter()
-    final = model_spec(observation, s.model)
-    driven = final.scene.bar.enabled and final.scene.bar.control == "travel"
-    fit_friction = driven if s.fit_friction is None else s.fit_friction
-    space = SearchSpace(force_n=s.force_n, friction=FRICTION_BOUNDS if fit_friction else None)
-    search_settings = ModelSettings(**{**s.model.__dict__, "integrator": s.search_integrator,
-                                       "tissue_particles": min(s.search_particles, s.model.tissue_particles)})
-    search = model_spec(observation, search_settings)
-    if s.objective not in OBJECTIVES:
-        raise InputError(f"unknown objective {s.objective!r}; expected {', '.join(OBJECTIVES)}", "objective")
-    objective = objective_for(s.objective, observation)
-    if objective == "contour+displacement":
-        if observation.motion is None:
-            raise InputError("the displacement objective needs speckle tracking (tracking = speckle)", "objective")
-        # both models carry the same points A (frame 0's contour resampled), so one set serves both
-        data = data.with_displacement(observation.motion.displacement, search.points_mm)
-    if s.quality_weights and observation.motion is not None and observation.contour_source == "speckle":
-        try:
-            data = data.with_contour_weights(observation.motion.displacement, search.points_mm)
-        except InputError:
-            pass    # the speckle shows none of the points: every point keeps weight 1, as without weights
-    shift = None if observation.motion is None else observation.motion.displacement.rigid_shift_mm
-    if s.bar_motion and shift is not None and observation.observed.setup.bar.enabled:
-        data = data.with_bar(shift, len(search.points_mm))
+    frames, data, objective, (final, search, space, driven) = _prepare_search(observation, s)
     timings["model_s"] = time.perf_counter() - t0
-
     asked = {"n": 0}
 
     def on_run(done, total):
@@ -185,22 +159,67 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         outcome = strategy_for(s).run(SearchJob(ev, s, search, final, driven, timings, tell))
     theta, unc = outcome.theta, outcome.assessment.uncertainty
     std = {n: float(v) for n, v in zip(space.names, unc.std)}   # inf: not seen by the data
-    resolution = None
-    if s.resolution_check:
-        t4 = time.perf_counter()
-        tell("resolution", 0.0)
-        check = resolution_check(outcome.model, space.parameters(theta), observation, int(max(frames)))
-        resolution = check.as_dict()
-        timings["resolution_check_s"] = time.perf_counter() - t4
-        tell("resolution", 1.0)
-        if not check.resolved:
-            log.warning("the fitted model is not resolved: on %d particles its points A move %.2f mm from where "
-                        "%d put them (more than a %.2f mm pixel); fit with more particles", check.particles[1],
-                        check.largest_mm, check.particles[0], check.pixel_mm)
+    resolution = (_resolution(outcome.model, space.parameters(theta), observation, frames, timings, tell)
+                  if s.resolution_check else None)
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), outcome.fit,
                        outcome.table1, outcome.record, outcome.assessment.degeneracy,
                        unc.correlation.round(3).tolist(), outcome.model, search, observation, ev.runs, timings,
                        ev.failed, objective, resolution=resolution, assessment=outcome.assessment)
+
+
+def _prepare_search(observation: Observation, s: CalibrationSettings):
+    """Step 2: the training frames and data, the objective, the final and search models and the
+    search space (a driven bar's friction a coordinate unless ``fit_friction`` says otherwise)."""
+    n_frames = len(observation.frame_masks)
+    frames = parse_frames(s.training_frames, n_frames, "training_frames") or default_frames(n_frames)[0]
+    final = model_spec(observation, s.model)
+    driven = final.scene.bar.enabled and final.scene.bar.control == "travel"
+    fit_friction = driven if s.fit_friction is None else s.fit_friction
+    space = SearchSpace(force_n=s.force_n, friction=FRICTION_BOUNDS if fit_friction else None)
+    search_settings = ModelSettings(**{**s.model.__dict__, "integrator": s.search_integrator,
+                                       "tissue_particles": min(s.search_particles, s.model.tissue_particles)})
+    search = model_spec(observation, search_settings)
+    data, objective = _training_data(observation, s, frames, search.points_mm)
+    return frames, data, objective, (final, search, space, driven)
+
+
+def _training_data(observation: Observation, s: CalibrationSettings, frames, points_mm: np.ndarray):
+    """The training frames' contours, with the speckle's displacements, its quality weights and the
+    bar's tracked shift where the settings ask for them and the observation has them; and the
+    objective resolved. ``points_mm`` are the points A both models carry (frame 0's contour
+    resampled), so one set serves the search and the final model."""
+    data = TrainingData.from_masks(observation.frame_masks, frames, observation.frame_plane)
+    if s.objective not in OBJECTIVES:
+        raise InputError(f"unknown objective {s.objective!r}; expected {', '.join(OBJECTIVES)}", "objective")
+    objective = objective_for(s.objective, observation)
+    if objective == "contour+displacement":
+        if observation.motion is None:
+            raise InputError("the displacement objective needs speckle tracking (tracking = speckle)", "objective")
+        data = data.with_displacement(observation.motion.displacement, points_mm)
+    if s.quality_weights and observation.motion is not None and observation.contour_source == "speckle":
+        try:
+            data = data.with_contour_weights(observation.motion.displacement, points_mm)
+        except InputError:
+            pass    # the speckle shows none of the points: every point keeps weight 1, as without weights
+    shift = None if observation.motion is None else observation.motion.displacement.rigid_shift_mm
+    if s.bar_motion and shift is not None and observation.observed.setup.bar.enabled:
+        data = data.with_bar(shift, len(points_mm))
+    return data, objective
+
+
+def _resolution(model: ModelSpec, parameters: Parameters, observation: Observation, frames,
+                timings: dict, tell) -> dict:
+    """Step 4: the fit run again on twice the particles, with a warning where it is not resolved."""
+    t0 = time.perf_counter()
+    tell("resolution", 0.0)
+    check = resolution_check(model, parameters, observation, int(max(frames)))
+    timings["resolution_check_s"] = time.perf_counter() - t0
+    tell("resolution", 1.0)
+    if not check.resolved:
+        log.warning("the fitted model is not resolved: on %d particles its points A move %.2f mm from where "
+                    "%d put them (more than a %.2f mm pixel); fit with more particles", check.particles[1],
+                    check.largest_mm, check.particles[0], check.pixel_mm)
+    return check.as_dict()
 
 
 #: the fitted coordinate → the parameters.json entries its value and error give

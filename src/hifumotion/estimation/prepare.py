@@ -198,19 +198,38 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     tissue, so that the tracked frame 0 and the model's shape agree there; without a bar cap,
     where tissue is seen at the bloom's edge (:func:`~hifumotion.speckle.segment_target`).
     """
-    from hifumotion.observed import shift_boundary
-    from hifumotion.segmentation import track
-
-    tell = progress or (lambda stage, fraction: None)
-    timings: dict[str, float] = {}
-    offset, z_frames = observed.setup.image_origin_mm, observed.setup.imaging.frames_plane_z_mm
-    px = observed.pixel_mm
-    init = observed.initial_contour
-
     if tracking not in ("speckle", "glcv"):
         raise InputError(f"unknown tracking {tracking!r}; expected speckle or glcv", "tracking")
+    tell = progress or (lambda stage, fraction: None)
+    timings: dict[str, float] = {}
+    sweep, rec, cap = _sweep_and_reconstruction(observed, method, fill_bar_cap, boundary_offset_mm, tell, timings)
+    t2 = time.perf_counter()
+    given = read_user_contours(contours_csv, observed) if contours_csv is not None else {}
+    if observed.initial_frame != 0:
+        raise InputError("the initial contour must be on frame 0 to track the series", "initial_contour.csv")
+    # with a bar cap, the reconstruction says where the bloom hides tissue at frame 0
+    shape = (_reconstruction_in_frame_plane(observed, rec) if tracking == "speckle" and continue_bloom
+             and cap is not None and not cap.skipped else None)
+    masks, motion = _track_frames(observed, method, tracking, boundary_offset_mm, continue_bloom, shape)
+    for frame, m in given.items():   # the user's contours replace the tracked ones where given
+        masks[frame] = m
+    source = str(contours_csv) if given else tracking
+    tell("track frames", 1.0)
+    timings["track_s"] = time.perf_counter() - t2
+    continued = continue_bloom and motion is not None
+    return Observation(observed, sweep, rec, observed.setup.image_origin_mm, masks, source, timings, motion, cap,
+                       continued, ("reconstruction" if shape is not None else "image") if continued else "")
+
+
+def _sweep_and_reconstruction(observed: Observed, method: str, fill_bar_cap: bool, boundary_offset_mm: float,
+                              tell, timings: dict):
+    """The sweep segmented (the known solids left out, the top continued under the resting bar
+    where ``fill_bar_cap``) and reconstructed, its surface moved inwards by the boundary offset."""
+    from hifumotion.observed import shift_boundary
+
+    px, init = observed.pixel_mm, observed.initial_contour
     t0 = time.perf_counter()
-    start = int(np.argmin(np.abs(observed.sweep_z_mm - z_frames)))
+    start = int(np.argmin(np.abs(observed.sweep_z_mm - observed.setup.imaging.frames_plane_z_mm)))
     exclude = np.stack([known_solid_mask(observed.setup, z) for z in observed.sweep_z_mm])
     sweep = segment_sweep(observed.sweep, init, start, method, spacing=px, exclude=exclude)
     cap = None
@@ -232,41 +251,39 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
         sweep.masks = np.stack([shift_boundary(m, boundary_offset_mm, px) if m.any() else m for m in sweep.masks])
     tell("reconstruct", 1.0)
     timings["reconstruct_s"] = time.perf_counter() - t1
+    return sweep, rec, cap
 
-    t2 = time.perf_counter()
-    given = read_user_contours(contours_csv, observed) if contours_csv is not None else {}
-    if observed.initial_frame != 0:
-        raise InputError("the initial contour must be on frame 0 to track the series", "initial_contour.csv")
-    # every frame is tracked (the online mode needs them all); the user's contours replace
-    # the tracked ones where given
-    # the floor, and the bar's place at rest: pushing along its axis it only moves away from
-    # there, into the tissue, so no frame has tissue where the resting bar was
-    motion, shape = None, None
+
+def _reconstruction_in_frame_plane(observed: Observed, rec) -> np.ndarray:
+    """The reconstruction's signed distance (mm, positive inside) at the frames' pixels."""
+    from hifumotion.observed.solids import imaging_plane
+
+    plane = imaging_plane(observed.setup)
+    pts = plane.points_mm().reshape(-1, 3)
+    return rec.inside(pts - observed.setup.image_origin_mm).reshape(tuple(plane.shape))
+
+
+def _track_frames(observed: Observed, method: str, tracking: str, boundary_offset_mm: float,
+                  continue_bloom: bool, bloom_shape_mm: np.ndarray | None):
+    """Every frame's target mask (the online mode needs them all) and, with speckle tracking, the
+    motion it followed. The floor, and the bar's place at rest, are left out: pushing along its
+    axis the bar only moves away from there, into the tissue, so no frame has tissue there."""
+    from hifumotion.observed import shift_boundary
+    from hifumotion.segmentation import track
+
+    px, init = observed.pixel_mm, observed.initial_contour
     if tracking == "speckle":
         from hifumotion.speckle import follow
 
-        if continue_bloom and cap is not None and not cap.skipped:
-            from hifumotion.observed.solids import imaging_plane
-
-            plane = imaging_plane(observed.setup)
-            pts = plane.points_mm().reshape(-1, 3)
-            shape = rec.inside(pts - offset).reshape(tuple(plane.shape))
         motion = follow(observed.frames.astype(np.float32) / 255.0, init, px, solids=frame_solids(observed),
                         boundary_offset_mm=boundary_offset_mm, method=method, continue_bloom=continue_bloom,
-                        bloom_shape_mm=shape)
-        masks = motion.masks.copy()
-    else:
-        masks = track(observed.frames, init, method, spacing=px, exclude=known_solid_mask(observed.setup, z_frames)).masks
-        if boundary_offset_mm:
-            masks = np.stack([shift_boundary(m, boundary_offset_mm, px) for m in masks])
-    for frame, m in given.items():
-        masks[frame] = m
-    source = str(contours_csv) if given else tracking
-    tell("track frames", 1.0)
-    timings["track_s"] = time.perf_counter() - t2
-    continued = continue_bloom and motion is not None
-    return Observation(observed, sweep, rec, offset, masks, source, timings, motion, cap, continued,
-                       ("reconstruction" if shape is not None else "image") if continued else "")
+                        bloom_shape_mm=bloom_shape_mm)
+        return motion.masks.copy(), motion
+    exclude = known_solid_mask(observed.setup, observed.setup.imaging.frames_plane_z_mm)
+    masks = track(observed.frames, init, method, spacing=px, exclude=exclude).masks
+    if boundary_offset_mm:
+        masks = np.stack([shift_boundary(m, boundary_offset_mm, px) for m in masks])
+    return masks, None
 
 
 __all__ = ["Observation", "frame_solids", "known_solid_mask", "prepare", "read_user_contours"]

@@ -48,51 +48,73 @@ def _provenance(observed_dir: str | Path | None, folder: Path) -> str | None:
 
 
 def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = None, extra: dict | None = None) -> dict:
-    """Write a :class:`~hifumotion.estimation.calibrate.Calibration` into ``folder``."""
-    from hifumotion.config import dump_toml
+    """Write a :class:`~hifumotion.estimation.calibrate.Calibration` into ``folder``: the fitted
+    model (``model/``), what it was fitted to (``observation/``) and ``parameters.json``."""
     from hifumotion.io import write_json
-    from hifumotion.io.files import atomic_path
-    from hifumotion.io.writers import write_png_stack
 
     folder = Path(folder)
     for d in ("model", "observation/frames", "observation/sweep"):
         (folder / d).mkdir(parents=True, exist_ok=True)
-    obs = cal.observation
+    _write_model(cal, folder / "model")
+    _write_observation(cal.observation, folder / "observation")
+    summary = {**_summary(cal, folder, observed_dir), **(extra or {})}
+    write_json(folder / "parameters.json", summary)
+    return summary
+
+
+def _write_model(cal, folder: Path) -> None:
+    """The fitted scene, its particles, the points A and the surface its voxels conform to."""
+    from hifumotion.config import dump_toml
+    from hifumotion.io.files import atomic_path
+
     spec = cal.spec
     scene = spec.scene.model_copy(deep=True)
     k = cal.parameters
     scene.tissue.youngs_modulus_pa, scene.tissue.poisson_ratio = k.youngs_modulus_pa, k.poisson_ratio
     scene.tissue.beta1, scene.tissue.beta2, scene.bar.force_n = k.beta1, k.beta2, k.force_n
     scene.tissue.particles_csv = Path("tissue_particles.csv")
-    write_text(folder / "model" / "scene.toml", dump_toml(scene))
-    _csv(folder / "model" / "tissue_particles.csv", "x_mm,y_mm,z_mm,volume_mm3",
+    write_text(folder / "scene.toml", dump_toml(scene))
+    _csv(folder / "tissue_particles.csv", "x_mm,y_mm,z_mm,volume_mm3",
          np.column_stack([spec.tissue_mm, spec.tissue_volume_mm3]))
-    _csv(folder / "model" / "contour_points.csv", "x_mm,y_mm,z_mm", spec.points_mm)
+    _csv(folder / "contour_points.csv", "x_mm,y_mm,z_mm", spec.points_mm)
     if spec.surface_vertices_mm is not None:
         # the model's voxels conform to this surface (ModelSpec.voxels): without it a loaded
         # calibration would run another mesh than the one that was fitted
-        with atomic_path(folder / "model" / "tissue_surface.npz") as tmp:
+        with atomic_path(folder / "tissue_surface.npz") as tmp:
             with open(tmp, "wb") as fh:
                 np.savez_compressed(fh, vertices_mm=np.asarray(spec.surface_vertices_mm, float),
                                     faces=np.asarray(spec.surface_faces, np.int64))
+
+
+def _write_observation(obs, folder: Path) -> None:
+    """Frame 0's reference shape, the tracked frames' masks (and material points), the sweep's
+    masks and the reconstruction."""
+    from hifumotion.io.files import atomic_path
+    from hifumotion.io.writers import write_png_stack
+
     rec = obs.reconstruction
     ref = obs.reference_shape()
     plane = ref.plane
-    with atomic_path(folder / "observation" / "reference.npz") as tmp:
+    with atomic_path(folder / "reference.npz") as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, frame0_mask=ref.frame0_mask, rec_distance_mm=ref.rec_distance_mm.astype(np.float32),
                                 rec_voxel_mm=ref.rec_voxel_mm, rec_origin_mm=np.asarray(ref.rec_origin_mm),
                                 plane_origin_mm=np.asarray(plane.origin_mm), plane_u=np.asarray(plane.u),
                                 plane_v=np.asarray(plane.v), plane_shape=np.asarray(plane.shape),
                                 pixel_mm=plane.pixel_mm)
-    write_png_stack(folder / "observation" / "frames", obs.frame_masks, prefix="frame_", digits=4)
+    write_png_stack(folder / "frames", obs.frame_masks, prefix="frame_", digits=4)
     if obs.motion is not None:   # the speckle-tracked material points beside the masks
         from hifumotion.speckle.output import material_points, write_material_points
 
-        write_material_points(folder / "observation", material_points(obs.motion), obs.motion.displacement.spacing_mm)
-    write_png_stack(folder / "observation" / "sweep", obs.sweep.masks, prefix="slice_", digits=3)
-    rec.write(folder / "observation")
-    summary = {
+        write_material_points(folder, material_points(obs.motion), obs.motion.displacement.spacing_mm)
+    write_png_stack(folder / "sweep", obs.sweep.masks, prefix="slice_", digits=3)
+    rec.write(folder)
+
+
+def _summary(cal, folder: Path, observed_dir) -> dict:
+    """``parameters.json``: the fit, its uncertainty, the models and the observation."""
+    obs, spec, rec = cal.observation, cal.spec, cal.observation.reconstruction
+    return {
         "description": "Parameters fitted by hifumotion calibrate (SI). 'determined' says whether the training "
                        "frames fix the value; E and β1 are at the nominal force (only F/E and β1/E are seen).",
         "observed": _provenance(observed_dir, folder),
@@ -140,10 +162,7 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
                         "bloom_continued_by": obs.bloom_continued_by,
                         "reconstructed_volume_mm3": rec.volume_mm3, "notes": obs.sweep.notes + rec.notes},
         "timings_s": {**obs.timings_s, **cal.timings_s},
-        **(extra or {}),
     }
-    write_json(folder / "parameters.json", summary)
-    return summary
 
 
 def frame0_fingerprint(frames: np.ndarray) -> str:

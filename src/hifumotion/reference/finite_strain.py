@@ -1,6 +1,6 @@
 """The tissue's law at finite strain, for a truth that the small-strain model cannot share.
 
-Issue 41: a push large enough to matter strains the tissue under the bar beyond 30 %, where
+A push large enough to matter strains the tissue under the bar beyond 30 %, where
 the small-strain truth (:mod:`.creep_fe`) and the fitted model are wrong in the same way. The
 paper's own elasticity (Eq. 13) is finite-strain. This module holds the finite-strain form of
 the tissue's two laws, for FElupe (Voigt, Zenodo 2021; nonlinear solids, rigid contact):
