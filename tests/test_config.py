@@ -195,3 +195,63 @@ def test_every_section_the_code_and_readme_cite_in_the_decisions_exists():
     assert cited, "no citation found: the pattern no longer matches how the sources cite"
     missing = sorted((name, m) for name, m in cited if not any(h.startswith(m) for h in headings))
     assert not missing, missing
+
+
+def _settings_defaults() -> dict:
+    """``(field, default) -> [(module:Class, literal?)]`` over every settings class in the package
+    (pydantic models and dataclasses named *Settings/*Config/*Setup/…), read from the source."""
+    import ast
+    import collections
+
+    import hifumotion
+
+    root = Path(hifumotion.__file__).parent
+    found = collections.defaultdict(list)
+    for path in root.rglob("*.py"):
+        if "cli" in path.parts:
+            continue
+        for cls in (n for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.ClassDef)):
+            bases = [ast.unparse(b) for b in cls.bases]
+            decorated = any(ast.unparse(d).startswith("dataclass") for d in cls.decorator_list)
+            if not (any(b in ("ConfigModel", "BaseModel") or b.endswith("Model") for b in bases)
+                    or decorated and cls.name.endswith(("Settings", "Config", "Setup", "Geometry", "Schedule"))):
+                continue
+            for statement in cls.body:
+                if not (isinstance(statement, ast.AnnAssign) and isinstance(statement.target, ast.Name)
+                        and statement.value is not None):
+                    continue
+                value = statement.value
+                if isinstance(value, ast.Call) and ast.unparse(value.func) in ("Field", "field"):
+                    keywords = {k.arg: k.value for k in value.keywords}
+                    value = value.args[0] if value.args else keywords.get("default")
+                    if value is None:
+                        continue
+                try:
+                    default, literal = repr(ast.literal_eval(value)), True
+                except ValueError:
+                    default, literal = ast.unparse(value), False
+                found[(statement.target.id, default)].append((f"{path.relative_to(root)}:{cls.name}", literal))
+    return found
+
+
+def test_each_setting_default_is_written_once():
+    """A setting that two classes share (a scene's and a setup's bar radius, the twin's and the
+    fitted model's mass scaling, the fast path's and its reduced model's tolerance) takes its
+    default from one home — a named constant or the other class — so the two cannot drift apart.
+    A repeated literal default of a field with the same name fails here. Seeds are each stage's
+    own random stream, not one setting."""
+    own_meaning = {"seed"}
+    repeats = {key: where for key, where in _settings_defaults().items()
+               if key[0] not in own_meaning and key[1] not in ("None", "True", "False")
+               and sum(literal for _, literal in where) > 1}
+    assert repeats == {}
+
+
+def test_the_settings_walk_sees_the_settings_it_checks():
+    """The walk above finds the classes it is meant to check (so an empty answer means no repeat,
+    not no classes): the scene's bar, the setup's bar, the fast path's and the fitted model's."""
+    seen = {where for group in _settings_defaults().values() for where, _ in group}
+    for cls in ("particles/scene.py:BarConfig", "observed/setup.py:BarSetup", "creep/settings.py:CreepSettings",
+                "creep/settings.py:ReducedSettings", "estimation/settings.py:ModelSettings",
+                "estimation/settings.py:CalibrationSettings", "experiment/config.py:TruthConfig"):
+        assert cls in seen

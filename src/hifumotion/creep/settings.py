@@ -129,7 +129,7 @@ class ReducedSettings:
     energy: Fraction = 1.0 - 1e-8
     max_modes: Annotated[int, Ge(1), Le(1000)] = 40
     contact_reach: Annotated[float, Ge(0)] = 1.0
-    contact_tolerance: Annotated[float, Ge(0)] = 1e-4
+    contact_tolerance: Annotated[float, Ge(0)] = CreepSettings.contact_tolerance
     kept_on_solid: Annotated[float, Ge(0)] = 1e-2
     friction: bool = True
     friction_touch: Positive = 1e-2
@@ -141,8 +141,8 @@ class ReducedSettings:
     hyper_samples: Count = 8
     corotation_tolerance: Annotated[float, Ge(0), Lt(1)] = 1e-3
     rotation_rounds: Count = 8
-    tolerance: Positive = 0.005
-    max_step_s: Positive = 1.0
+    tolerance: Positive = CreepSettings.tolerance
+    max_step_s: Positive = CreepSettings.max_step_s
     first_step_s: Positive | None = None
 
 

@@ -21,7 +21,8 @@ from pydantic import Field, field_validator, model_validator
 import numpy as np
 from annotated_types import Ge, Gt, Le
 
-from hifumotion.numerics import CFL
+from hifumotion.apparatus import FRICTION
+from hifumotion.numerics import CFL, QUASI_STATIC_MASS_SCALING, QUASI_STATIC_MAX_STEP_S, SUPPORT_FACTOR
 from hifumotion.physical import TISSUE_DENSITY_KG_M3
 from hifumotion import paper
 from hifumotion.config import ConfigModel
@@ -51,15 +52,15 @@ class ModelSettings:
     """Numerical settings of the fitted model (not fitted themselves)."""
 
     tissue_particles: Annotated[int, Ge(100), Le(1_000_000)] = paper.TISSUE_PARTICLES  # the paper's count
-    support_factor: Annotated[float, Ge(1.5), Le(3.0)] = 2.0   # kernel support h in spacings
-    mass_scaling: Annotated[float, Ge(1.0)] = 2.0e4    # inertia multiplier of the quasi-static push
+    support_factor: Annotated[float, Ge(1.5), Le(3.0)] = SUPPORT_FACTOR   # kernel support h in spacings
+    mass_scaling: Annotated[float, Ge(1.0)] = QUASI_STATIC_MASS_SCALING    # inertia multiplier of the quasi-static push
     settle_periods: Annotated[float, Gt(0)] = 6.0      # settling time in 1/ω of the slowest elastic mode
     cfl: Annotated[float, Gt(0), Le(1.0)] = CFL        # safety factor on the time step
-    max_step_s: Annotated[float, Gt(0)] = 5e-3         # largest time step (s)
+    max_step_s: Annotated[float, Gt(0)] = QUASI_STATIC_MAX_STEP_S         # largest time step (s)
     force_ramp_s: Annotated[float, Ge(0)] | None = None  # the force's linear rise (s); default: setup.json's push.ramp_s
     tissue_density_kg_m3: Annotated[float, Gt(0)] = TISSUE_DENSITY_KG_M3
     rate_floor_per_s: Annotated[float, Gt(0)] = RATE_FLOOR_PER_S   # floor of the shear rate in Eq. 16's μ (1/s; hifumotion.rheology)
-    friction: Annotated[float, Ge(0)] = 0.5            # Coulomb friction of the tissue on the floor and the bar's face
+    friction: Annotated[float, Ge(0)] = FRICTION            # Coulomb friction of the tissue on the floor and the bar's face
                                         # (the operator's estimate, not fitted; a sample that slides depends on it)
     contour_points: Annotated[int, Ge(8), Le(10_000)] = 64   # size of the point set A
     integrator: Literal["implicit", "explicit", "reduced"] = "implicit"  # one of INTEGRATORS: "implicit", the fast path (hifumotion.creep);

@@ -26,7 +26,8 @@ from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
 from hifumotion.resources import MAX_FRAMES
 from hifumotion.particles.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
-from hifumotion.numerics import CFL
+from hifumotion.numerics import (CFL, QUASI_STATIC_MASS_SCALING, QUASI_STATIC_MAX_STEP_S, SUPPORT_FACTOR,
+                                  TRUTH_STEP_S, TRUTH_TOLERANCE_MM)
 from hifumotion import paper
 
 
@@ -49,7 +50,7 @@ class BlobConfig(ConfigModel):
 class ResolutionConfig(ConfigModel):
     model_tissue_particles: int = Field(paper.TISSUE_PARTICLES, ge=100, description="tissue particles of the model that will be fitted (the paper: 4,399)")
     truth_particle_factor: float = Field(2.0, ge=1.0, description="the truth has this many times the fitted model's particles (≥ 2 for an honest test)")
-    support_factor: float = Field(2.0, ge=1.5, le=3.0, description="kernel support radius h in particle spacings")
+    support_factor: float = Field(SUPPORT_FACTOR, ge=1.5, le=3.0, description="kernel support radius h in particle spacings")
 
 
 #: Longest cine a twin simulates (s).
@@ -91,11 +92,11 @@ class ClinicianConfig(ConfigModel):
 
 
 class TwinRunConfig(ConfigModel):
-    mass_scaling: float = Field(20000.0, ge=1.0, description="inertia multiplier of the quasi-static push (weights unchanged; see docs/decisions.md for the tolerance)")
+    mass_scaling: float = Field(QUASI_STATIC_MASS_SCALING, ge=1.0, description="inertia multiplier of the quasi-static push (weights unchanged; see docs/decisions.md for the tolerance)")
     settle_s: float | None = Field(None, ge=0, description="damped settling under gravity before t = 0 in s; default: 6 periods' worth (6/ω) of the tissue's slowest elastic mode under the mass scaling")
     settle_damping_per_s: float | None = Field(None, ge=0, description="velocity damping while settling in 1/s; default: 2ω, critical damping of that mode")
     cfl: float = Field(CFL, gt=0, le=1.0, description="safety factor on the time step")
-    max_step_s: float = Field(5e-3, gt=0, description="largest time step in s")
+    max_step_s: float = Field(QUASI_STATIC_MAX_STEP_S, gt=0, description="largest time step in s")
     particle_frames_every: int = Field(5, ge=1, description="write every n-th frame's particles as VTU (all frames go to tissue_trajectory.npz)")
 
 
@@ -103,8 +104,8 @@ class TruthConfig(ConfigModel):
     solver: Literal["finite_elements", "finite_strain", "particles"] = Field("finite_elements", description="what computes the truth: finite_elements (small strain: P2 tetrahedra, BDF2, Coulomb contacts; independent of the fitted voxel model), finite_strain (the same tetrahedra at finite strain on FElupe: neo-Hookean, Eq. 16's viscosity, frictional contacts; for pushes that strain the tissue beyond ~10 %) or particles (the explicit SPH path of Eq. 8–20)")
     max_volume_mm3: float = Field(8.0, gt=0, description="finite elements: largest tetrahedron in mm³")
     surface_subdivisions: int = Field(3, ge=2, le=5, description="finite elements: icosphere subdivisions of the sample's surface (3: 1,280 triangles)")
-    tolerance_mm: float = Field(0.002, gt=0, description="finite elements: local error of a time step in mm")
-    step_s: float = Field(0.05, gt=0, le=1.0, description="finite strain: the largest backward-Euler step in s")
+    tolerance_mm: float = Field(TRUTH_TOLERANCE_MM, gt=0, description="finite elements: local error of a time step in mm")
+    step_s: float = Field(TRUTH_STEP_S, gt=0, le=1.0, description="finite strain: the largest backward-Euler step in s")
 
 
 class ProtocolConfig(ConfigModel):

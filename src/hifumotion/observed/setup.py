@@ -18,6 +18,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
+from hifumotion.apparatus import BAR_CONTROL, BAR_DIRECTION, BAR_EDGE_RADIUS_MM, BAR_LENGTH_MM, BAR_RADIUS_MM
 from hifumotion.config import ConfigModel, validate_config
 from hifumotion.errors import InputError
 
@@ -71,12 +72,12 @@ class BarSetup(ConfigModel):
     """The pushing bar: a rigid cylinder, its end face the tip."""
 
     enabled: bool = Field(True, description="whether a bar pushes the tissue")
-    radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar in mm")
-    length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
-    direction: Vector3 = Field((0.0, -1.0, 0.0), description="direction the bar pushes along (normalised on reading)")
+    radius_mm: float = Field(BAR_RADIUS_MM, gt=0, description="radius of the cylindrical bar in mm")
+    length_mm: float = Field(BAR_LENGTH_MM, gt=0, description="length of the bar in mm")
+    direction: Vector3 = Field(BAR_DIRECTION, description="direction the bar pushes along (normalised on reading)")
     tip_at_rest_mm: Vector3 = Field(description="pool position of the bar's tip before the push, mm")
     weight_supported: bool = Field(True, description="a hand carries the bar's weight")
-    edge_radius_mm: float = Field(0.5, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the model rounds its rim at the larger of this and half a voxel spacing")
+    edge_radius_mm: float = Field(BAR_EDGE_RADIUS_MM, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the model rounds its rim at the larger of this and half a voxel spacing")
 
     @model_validator(mode="after")
     def _edge_within_radius(self):
@@ -97,7 +98,7 @@ class PushSchedule(ConfigModel):
     """The push's schedule: the shape of its force (its magnitude is what the estimation finds)
     or, for a bar driven in travel control, its travel itself (the stage's program: known)."""
 
-    control: Literal["force", "travel"] = Field("force", description="force: the bar pushes with a force of known shape and unknown size; travel: the bar is driven along its axis by travel_mm at times_s (its force is a result)")
+    control: Literal["force", "travel"] = Field(BAR_CONTROL, description="force: the bar pushes with a force of known shape and unknown size; travel: the bar is driven along its axis by travel_mm at times_s (its force is a result)")
     shape: Literal["ramp_hold", "piecewise_linear"] = Field("ramp_hold", description="ramp_hold: a linear rise over ramp_s, then held; piecewise_linear: the force at times_s is relative_force × its unknown peak (travel control: the travel is travel_mm), linear in between")
     ramp_s: float = Field(0.0, ge=0, description="duration of the rise (s)")
     times_s: list[float] | None = Field(None, description="piecewise_linear: the schedule's times (s), increasing")

@@ -32,6 +32,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
+from hifumotion.apparatus import BAR_CONTROL, BAR_DIRECTION, BAR_EDGE_RADIUS_MM, BAR_LENGTH_MM, BAR_RADIUS_MM, FRICTION
 from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
 from hifumotion.config import ConfigModel
 from hifumotion.errors import InputError
@@ -39,7 +40,7 @@ from hifumotion.resources import MAX_FRAMES, check_memory
 from hifumotion.rheology import RATE_FLOOR_PER_S
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.rigid import piecewise_linear_schedule
-from hifumotion.numerics import CFL
+from hifumotion.numerics import CFL, SUPPORT_FACTOR
 from hifumotion.particles.solver import SolverSettings
 from hifumotion.particles.system import (CouplingParameters, FluidParameters, ParticleSystem,
                                          build_system, lattice, tank_walls)
@@ -110,14 +111,14 @@ MAX_FORCE_N = 1000.0
 
 class BarConfig(ConfigModel):
     enabled: bool = Field(True, description="whether there is a pushing bar")
-    radius_mm: float = Field(6.0, gt=0, description="radius of the cylindrical bar (its flat pushing end) in mm")
-    length_mm: float = Field(12.0, gt=0, description="length of the bar in mm")
-    edge_radius_mm: float = Field(0.5, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the finite-strain truth's bar is this solid; the fast path rounds its rim at the larger of this and half a voxel spacing; the particle path and the small-strain truth push with the end's flat disc")
-    direction: tuple[float, float, float] = Field((0.0, -1.0, 0.0), description="unit vector the bar points and pushes along (default: down onto the tissue)")
+    radius_mm: float = Field(BAR_RADIUS_MM, gt=0, description="radius of the cylindrical bar (its flat pushing end) in mm")
+    length_mm: float = Field(BAR_LENGTH_MM, gt=0, description="length of the bar in mm")
+    edge_radius_mm: float = Field(BAR_EDGE_RADIUS_MM, gt=0, description="rounding of the edge of the bar's pushing end in mm (a machined bar's edge break; at most radius_mm); the finite-strain truth's bar is this solid; the fast path rounds its rim at the larger of this and half a voxel spacing; the particle path and the small-strain truth push with the end's flat disc")
+    direction: tuple[float, float, float] = Field(BAR_DIRECTION, description="unit vector the bar points and pushes along (default: down onto the tissue)")
     tip_mm: tuple[float, float, float] | None = Field(None, description="position of the bar's tip (mm); default: touching the tissue (one spacing from the first tissue particle under its end face), on the axis through the tissue's centre")
     density_kg_m3: float = Field(7800.0, gt=0, description="density of the bar (steel) in kg/m³")
     weight_supported: bool = Field(True, description="the hand holding the bar carries its weight, so the push on the tissue is force_n alone")
-    control: Literal["force", "travel"] = Field("force", description="what drives the bar: force (it pushes with force_n or schedule_force_n, and how far it goes is a result) or travel (its end is driven along its axis by travel_mm or schedule_travel_mm from where it rests on the settled tissue, and the force it takes is a result)")
+    control: Literal["force", "travel"] = Field(BAR_CONTROL, description="what drives the bar: force (it pushes with force_n or schedule_force_n, and how far it goes is a result) or travel (its end is driven along its axis by travel_mm or schedule_travel_mm from where it rests on the settled tissue, and the force it takes is a result)")
     force_n: float = Field(paper.FORCE_N, ge=0, le=MAX_FORCE_N, description="pushing force held after the ramp, in N (Table 3: 0.25; at most 1,000); the bar pushes, it does not pull")
     travel_mm: float = Field(0.0, ge=0, le=1000.0, description="travel control: how far the bar's end is driven along its axis by the end of the ramp, in mm, from where it rests on the settled tissue")
     ramp_s: float = Field(0.2, ge=0, description="time over which the force (travel control: the travel) rises linearly from 0, in s")
@@ -175,7 +176,7 @@ class BarConfig(ConfigModel):
 
 class ParticleConfig(ConfigModel):
     spacing_mm: float = Field(1.5, gt=0, description="particle spacing Δx in mm")
-    support_factor: float = Field(2.0, ge=1.5, le=3.0, description="kernel support radius h in spacings")
+    support_factor: float = Field(SUPPORT_FACTOR, ge=1.5, le=3.0, description="kernel support radius h in spacings")
 
 
 class PhysicsConfig(ConfigModel):
@@ -186,7 +187,7 @@ class PhysicsConfig(ConfigModel):
     contact_coefficient: float | None = Field(None, ge=0, description="K_c of Eq. 18 between solids in N·m⁴/kg²; default from E")
     contact_pressure_factor: float = Field(4.0, gt=0, description="default K_c makes the largest tissue–bar pair force this × E × Δx²")
     fluid_coefficient: float = Field(0.0, ge=0, description="K_c of Eq. 18 between water and solids in N·m⁴/kg²")
-    friction: float = Field(0.5, ge=0, description="Coulomb friction between solids (tissue–floor, tissue–bar)")
+    friction: float = Field(FRICTION, ge=0, description="Coulomb friction between solids (tissue–floor, tissue–bar)")
 
 
 class RunConfig(ConfigModel):
@@ -194,9 +195,9 @@ class RunConfig(ConfigModel):
     output_interval_s: float = Field(0.05, gt=0, description="time between written frames, in s")
     settle_s: float = Field(0.2, ge=0, description="settling under gravity (damped, bar held) before t = 0, in s")
     settle_damping_per_s: float = Field(40.0, ge=0, description="velocity damping while settling, in 1/s")
-    mass_scaling: float = Field(1.0, ge=1.0, description="inertia multiplier for quasi-static runs (weights unchanged)")
+    mass_scaling: float = Field(SolverSettings.mass_scaling, ge=1.0, description="inertia multiplier for quasi-static runs (weights unchanged)")
     cfl: float = Field(CFL, gt=0, le=1.0, description="safety factor on the time step")
-    max_step_s: float = Field(1e-3, gt=0, description="largest time step in s")
+    max_step_s: float = Field(SolverSettings.max_step_s, gt=0, description="largest time step in s")
     write_vtu: bool = Field(True, description="write VTU files of the particles (with a PVD index)")
     vtu_every: int = Field(1, ge=1, description="write every n-th output frame as VTU")
 

@@ -42,6 +42,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from hifumotion.numerics import TRUTH_TOLERANCE_MM
 from hifumotion.physical import STANDARD_GRAVITY_M_S2, TISSUE_DENSITY_KG_M3, WATER_DENSITY_KG_M3
 from hifumotion.errors import InputError
 from hifumotion.rheology import MU_MAX_PA_S
@@ -93,7 +94,7 @@ class CreepFESettings:
     the rounds of contact/viscosity iteration per step and their relative tolerance, and the
     tangential displacement (mm) up to which a contact's friction is elastic (Coulomb's law regularised)."""
 
-    tolerance_mm: float = 0.002
+    tolerance_mm: float = TRUTH_TOLERANCE_MM
     first_step_s: float = 2e-3
     max_step_s: float = 0.25
     max_rounds: int = 60

@@ -42,6 +42,7 @@ from typing import Callable
 
 import numpy as np
 
+from hifumotion.numerics import TRUTH_STEP_S
 from hifumotion.errors import InputError
 from hifumotion.reference._p2 import MM, p2_mesh, spsolve
 from hifumotion.reference.creep_fe import CreepFESolution, CreepingTissue
@@ -61,7 +62,7 @@ class FiniteStrainSettings:
     contacts' penalty switching holds Newton's residual near 4 × 10⁻⁴ of the push and the
     steps crawl (docs/decisions.md, "A finite-strain truth on FElupe")."""
 
-    step_s: float = 0.05
+    step_s: float = TRUTH_STEP_S
     contact_multiplier: float = 100.0
     face_contact_multiplier: float = 1000.0
     elastic_slip_mm: float | None = 0.005
