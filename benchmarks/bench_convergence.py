@@ -38,7 +38,7 @@ from concurrent.futures import ProcessPoolExecutor
 def one_implicit(factor: float, preset: str, seed: int) -> dict:
     import numpy as np
 
-    from hifumotion.creep.scene import simulate_creep
+    from hifumotion.creep.scene_run import simulate_creep
     from hifumotion.creep.conform import conform
     from hifumotion.creep.voxels import voxel_mesh
     from hifumotion.experiment import twin_config

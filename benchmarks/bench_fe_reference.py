@@ -38,7 +38,7 @@ def ellipsoid_surface(scene, subdivisions: int):
 
 
 def main() -> None:
-    from hifumotion.creep.scene import scene_punch, simulate_creep, tissue_mesh
+    from hifumotion.creep.scene_run import scene_punch, simulate_creep, tissue_mesh
     from hifumotion.particles.scene import Scene, spacing_for_count, tissue_particles_mm
     from hifumotion.reference import PunchedTissue, punch_reference
 

@@ -51,7 +51,7 @@ def fast_path(particles: int, push_s: float = 10.0) -> dict:
     """10 s of the synthetic twin's push (its material and bar) on the fast path (hifumotion.creep)."""
     import numpy as np
 
-    from hifumotion.creep.scene import simulate_creep, tissue_mesh
+    from hifumotion.creep.scene_run import simulate_creep, tissue_mesh
     from hifumotion.experiment.config import TwinConfig
     from hifumotion.particles.scene import Scene, spacing_for_count, tissue_particles_mm
 

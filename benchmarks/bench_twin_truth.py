@@ -29,7 +29,7 @@ def main() -> None:
     args = ap.parse_args()
     from _rigid_split import split_difference
 
-    from hifumotion.creep.scene import simulate_creep
+    from hifumotion.creep.scene_run import simulate_creep
     from hifumotion.experiment.blob import Blob
     from hifumotion.experiment.config import TwinConfig, apply_protocol
     from hifumotion.experiment.twin import _seeds, truth_scene

@@ -28,7 +28,7 @@ def _follow(known, changed, snapshots, after_s, seed, k=3, noise_mm=0.02):
     ``snapshots``; from ``after_s`` on, the mean centroid error k frames ahead of the filter, of
     holding the last observed frame and of the reduced model run on ``known``: ``(errors,
     the last estimate)``."""
-    from hifumotion.creep.scene import scene_material, simulate_creep, tissue_mesh
+    from hifumotion.creep.scene_run import scene_material, simulate_creep, tissue_mesh
     from hifumotion.reduced.build import reduced_creep
     from hifumotion.prediction.assimilate import AssimilationSettings, OnlineAssimilator, particle_observation
 

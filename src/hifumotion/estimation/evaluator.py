@@ -85,7 +85,7 @@ def full_run_task(spec: ModelSpec, data: TrainingData, k: Parameters, upto: int,
 
 def snapshot_task(spec: ModelSpec, scene, threads: int | None = 1):
     """One snapshot run of the spec's reduced model (a Dask task; :meth:`~.model.ModelSpec.snapshot_scenes`)."""
-    from hifumotion.creep.scene import snapshot_run
+    from hifumotion.creep.scene_run import snapshot_run
 
     _use_threads(threads)
     return snapshot_run(scene, spec.voxels(), spec.tissue_volume_mm3, spec.settings.creep)

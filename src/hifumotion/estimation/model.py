@@ -139,7 +139,7 @@ class ModelSpec:
 
     def adopt_reduced(self, k: "Parameters", last_frame: int, runs: list) -> object:
         """Make and keep the reduced model around ``k`` from its snapshot runs made elsewhere
-        (:func:`~hifumotion.creep.scene.snapshot_run` of each of :meth:`snapshot_scenes`, e.g. on a
+        (:func:`~hifumotion.creep.scene_run.snapshot_run` of each of :meth:`snapshot_scenes`, e.g. on a
         cluster's cores)."""
         from hifumotion.reduced.build import reduced_from_runs
 
@@ -301,7 +301,7 @@ def _implicit(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
 
 def _implicit_with_nodes(spec: ModelSpec, scene: Scene):
     """The fast path's run and its :class:`~hifumotion.creep.integrate.CreepResult` (nodes and all)."""
-    from hifumotion.creep.scene import run_creep
+    from hifumotion.creep.scene_run import run_creep
 
     return run_creep(scene, spec.voxels(), spec.tissue_volume_mm3, spec.settings.creep)
 
@@ -323,7 +323,7 @@ def _reduced(spec: ModelSpec, scene: Scene, k: Parameters, last_frame: int):
 
 
 def _implicit_scene(scene: Scene, folder=None, progress=None):
-    from hifumotion.creep.scene import simulate_creep
+    from hifumotion.creep.scene_run import simulate_creep
 
     return simulate_creep(scene, folder, progress=progress)
 

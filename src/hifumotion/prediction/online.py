@@ -234,7 +234,7 @@ class OnlineSession:
         import time
 
         from hifumotion.contour import Contour
-        from hifumotion.creep.scene import scene_material
+        from hifumotion.creep.scene_run import scene_material
         from hifumotion.estimation.model import scene_for
         from hifumotion.metrics import centroid
         from hifumotion.observed.solids import imaging_plane, known_solids

@@ -1,6 +1,6 @@
 """The reduced model made from full runs of a scene, and a scene run on it.
 
-:func:`reduced_creep` runs the full model (:func:`~hifumotion.creep.scene.snapshot_run`) at a few
+:func:`reduced_creep` runs the full model (:func:`~hifumotion.creep.scene_run.snapshot_run`) at a few
 scenes and keeps the motion's modes (:func:`~.model.pod_basis`); :func:`reduced_from_runs` does
 the same from runs made elsewhere (on a cluster's cores); :func:`simulate_reduced` runs a
 scene's material, force or travel and friction on the model and returns the full path's
@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.creep.integrate import CreepResult
-from hifumotion.creep.scene import (bar_centres, creep_solver, output_times, scene_material, scene_punch,
+from hifumotion.creep.scene_run import (bar_centres, creep_solver, output_times, scene_material, scene_punch,
                                     simulation_result, snapshot_run)
 from hifumotion.creep.settings import CreepSettings
 from hifumotion.particles.scene import Scene
@@ -25,7 +25,7 @@ from hifumotion.reduced.model import ReducedCreep, ReducedSettings, pod_basis
 def reduced_from_runs(scene: Scene, mesh, runs: list[CreepResult], settings=None,
                       creep: CreepSettings | None = None):
     """A :class:`~.model.ReducedCreep` of ``mesh`` whose modes are the motion of the full
-    ``runs`` (:func:`~hifumotion.creep.scene.snapshot_run`; the first one's settled state is the model's), its
+    ``runs`` (:func:`~hifumotion.creep.scene_run.snapshot_run`; the first one's settled state is the model's), its
     matrices those of ``scene``'s solver (``creep``, its settings)."""
     settings = settings or ReducedSettings()
     solver, _ = creep_solver(scene, mesh, creep)
