@@ -33,7 +33,7 @@ from hifumotion import paper
 
 
 def paper_scene(spacing_mm: float = 1.16):
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     scene = Scene()
     scene.particles.spacing_mm = spacing_mm
@@ -53,7 +53,8 @@ def fast_path(particles: int, push_s: float = 10.0) -> dict:
 
     from hifumotion.creep.scene_run import simulate_creep, tissue_mesh
     from hifumotion.experiment.config import TwinConfig
-    from hifumotion.particles.scene import Scene, spacing_for_count, tissue_particles_mm
+    from hifumotion.scene import Scene
+    from hifumotion.particles.scene_system import spacing_for_count, tissue_particles_mm
 
     twin = TwinConfig()
     scene = Scene()
@@ -93,7 +94,7 @@ def main(argv=None) -> dict:
         os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
     import numba
 
-    from hifumotion.particles.scene import build_scene, solver_settings
+    from hifumotion.particles.scene_system import build_scene, solver_settings
     from hifumotion.particles.solver import Solver
 
     scene = paper_scene()

@@ -110,7 +110,8 @@ def test_reading_a_setting_does_not_load_the_solvers():
 
 
 def test_a_bar_is_driven_by_a_force_or_by_its_travel_and_the_other_schedule_is_refused(tmp_path):
-    from hifumotion.particles.scene import BarConfig, Scene, build_scene
+    from hifumotion.scene import BarConfig, Scene
+    from hifumotion.particles.scene_system import build_scene
 
     bar = BarConfig(control="travel", schedule_times_s=[0.0, 2.0, 4.0], schedule_travel_mm=[0.0, 3.0, 1.0])
     travel = bar.travel_schedule()
@@ -134,7 +135,7 @@ def test_setup_json_carries_a_driven_bars_travel_and_the_model_is_driven_by_it()
     """A driven bar's stage program is the operator's to know: ``setup.json``'s push holds its
     travel (not a force shape), and the bar the model is built with is driven by it."""
     from hifumotion.observed.setup import PushSchedule
-    from hifumotion.particles.scene import BarConfig
+    from hifumotion.scene import BarConfig
 
     push = PushSchedule(control="travel", shape="piecewise_linear", times_s=[0.0, 2.0, 6.0], travel_mm=[0.0, 1.0, 4.0])
     bar = BarConfig(**push.schedule(0.3))
@@ -251,7 +252,7 @@ def test_the_settings_walk_sees_the_settings_it_checks():
     """The walk above finds the classes it is meant to check (so an empty answer means no repeat,
     not no classes): the scene's bar, the setup's bar, the fast path's and the fitted model's."""
     seen = {where for group in _settings_defaults().values() for where, _ in group}
-    for cls in ("particles/scene.py:BarConfig", "observed/setup.py:BarSetup", "creep/settings.py:CreepSettings",
+    for cls in ("scene/config.py:BarConfig", "observed/setup.py:BarSetup", "creep/settings.py:CreepSettings",
                 "creep/settings.py:ReducedSettings", "estimation/settings.py:ModelSettings",
                 "estimation/settings.py:CalibrationSettings", "experiment/config.py:TruthConfig"):
         assert cls in seen

@@ -67,7 +67,7 @@ def test_a_round_bottomed_sample_settles_into_an_equilibrium_that_then_holds():
     # rounds' loose solves do not resolve. Its settled state (frame 0) must be an equilibrium:
     # with nothing applied afterwards, nothing moves (a voxel surface short of the sample's once leaned it back 0.4 mm)
     from hifumotion.creep.scene_run import scene_material, tissue_mesh
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     scene = Scene()
     scene.particles.spacing_mm = 2.0
@@ -183,7 +183,7 @@ def test_a_released_bar_rests_on_the_block_as_it_creeps_back_by_the_kelvin_voigt
 
 def test_the_bar_takes_its_force_and_nothing_crosses_a_surface():
     from hifumotion.creep.scene_run import simulate_creep
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     scene = Scene()
     scene.particles.spacing_mm = 3.0
@@ -204,7 +204,7 @@ def test_fast_path_agrees_with_the_finite_element_reference():
     import trimesh
 
     from hifumotion.creep.scene_run import scene_punch, simulate_creep, tissue_mesh
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
     from hifumotion.reference import PunchedTissue, punch_reference
 
     scene = Scene()
@@ -670,7 +670,7 @@ def test_the_reduced_model_follows_the_full_one_on_the_floor_at_pushes_its_snaps
     # the push; the reduced run at a push between must keep to the full run's motion (3 % of
     # it) and off the floor.
     from hifumotion.creep.scene_run import creep_solver, output_times, scene_material, scene_punch, snapshot_run, tissue_mesh
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     def scene_at(f):
         return Scene.model_validate({
@@ -818,7 +818,7 @@ def test_a_tilted_bar_slides_a_reduced_ellipsoid_on_a_rough_floor_as_the_full_mo
     from hifumotion.reduced.model import ReducedSettings
     from hifumotion.creep.scene_run import scene_material, simulate_creep, tissue_mesh
     from hifumotion.reduced.build import reduced_creep
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     def scene(travel_mm):
         return Scene.model_validate({

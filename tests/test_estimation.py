@@ -18,7 +18,8 @@ from hifumotion.estimation.model import Parameters
 from hifumotion.estimation.objective import TrainingData, frame_sums_mm, residuals_mm
 from hifumotion.estimation.protocol import default_frames, parse_frames
 from hifumotion.estimation.space import SearchSpace
-from hifumotion.particles.section import Plane, displacement_at, material_displacement, plane_displacement
+from hifumotion.scene import Plane
+from hifumotion.particles.section import displacement_at, material_displacement, plane_displacement
 from hifumotion.prediction.physics import ReferenceShape, predicted_mask
 
 PLANE = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (120, 140), 0.2)
@@ -658,7 +659,7 @@ def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_fri
 
 def test_a_fitted_friction_reaches_the_models_scene():
     from hifumotion.estimation.model import ModelSpec, scene_for
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     spec = ModelSpec(Scene(), np.zeros((1, 3)), np.ones(1), np.zeros((1, 3)), 0.05)
     assert scene_for(spec, Parameters(friction=0.07), 10).physics.friction == 0.07
@@ -904,7 +905,7 @@ def test_the_displacement_objective_is_the_weighted_difference_of_the_points_mot
     """Points A that move as the speckle says leave no displacement residual; a point moved
     0.2 mm too far in x leaves 0.2 × its quality; an occluded point (quality 0) leaves none."""
     from hifumotion.estimation.objective import TrainingData, residuals_mm
-    from hifumotion.particles.section import Plane
+    from hifumotion.scene import Plane
     from hifumotion.speckle import DisplacementSeries
 
     plane = Plane((0.0, 0.0, 5.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (40, 40), 0.5)

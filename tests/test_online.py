@@ -11,7 +11,7 @@ from hifumotion.errors import InputError
 def _scene(times_s, values, control="force", duration_s=8.0):
     """The ellipsoid under a bar pushed by ``values`` N (``control="force"``) or driven
     ``values`` mm (``"travel"``) at ``times_s``."""
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     schedule = "schedule_force_n" if control == "force" else "schedule_travel_mm"
     return Scene.model_validate({

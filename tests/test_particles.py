@@ -194,7 +194,8 @@ def test_validation_hydrostatic_pressure():
 
 # -- sections, scenes, output, command line -------------------------------------------
 def test_section_of_a_particle_sphere_is_a_disc_of_its_radius():
-    from hifumotion.particles.section import Plane, section
+    from hifumotion.scene import Plane
+    from hifumotion.particles.section import section
 
     dx = 1.0
     pts = lattice([-10, -10, -10], [10, 10, 10], dx)
@@ -211,7 +212,7 @@ def test_section_of_a_particle_sphere_is_a_disc_of_its_radius():
 
 
 def _tiny_scene():
-    from hifumotion.particles.scene import Scene
+    from hifumotion.scene import Scene
 
     scene = Scene()
     scene.particles.spacing_mm = 2.5
@@ -254,14 +255,14 @@ def test_simulated_push_moves_the_bar_along_its_axis_and_writes_paraview_files(t
 
 def test_scene_file_errors_name_the_field(tmp_path):
     from hifumotion.errors import InputError
-    from hifumotion.particles.scene import load_scene
+    from hifumotion.scene import load_scene
 
     bad = tmp_path / "scene.toml"
     bad.write_text("[tissue]\npoisson_ratio = 0.7\n")
     with pytest.raises(InputError, match="tissue.poisson_ratio"):
         load_scene(bad)
     bad.write_text('[tissue]\nshape = "particles"\nparticles_csv = "nope.csv"\n')
-    from hifumotion.particles.scene import build_scene
+    from hifumotion.particles.scene_system import build_scene
 
     with pytest.raises(InputError, match="nope.csv"):
         build_scene(load_scene(bad))
@@ -307,7 +308,8 @@ def test_command_line_simulate_and_validate(tmp_path):
 
 
 def test_scene_tissue_from_reconstructed_particles_rests_on_the_floor(tmp_path):
-    from hifumotion.particles.scene import Scene, build_scene
+    from hifumotion.scene import Scene
+    from hifumotion.particles.scene_system import build_scene
 
     pts = lattice([-6, -4, -5], [6, 4, 5], 2.0)
     pts = pts[(((pts) / [6, 4, 5]) ** 2).sum(1) <= 1] + [100.0, 50.0, -20.0]  # any frame the user had
@@ -411,7 +413,8 @@ def test_mapped_section_follows_an_affine_motion_exactly():
     # shifted: its section through the centre is the analytic ellipse (a Shepard average
     # of an affine field is that field)
     from hifumotion.metrics import dice
-    from hifumotion.particles.section import Plane, mapped_section
+    from hifumotion.scene import Plane
+    from hifumotion.particles.section import mapped_section
 
     dx, radius = 0.8, 6.0
     rest = lattice([-8, -8, -8], [8, 8, 8], dx)

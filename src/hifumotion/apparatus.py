@@ -1,7 +1,7 @@
 """The apparatus' nominal values, once: the pushing bar's geometry and control, the friction of
 the tissue on the floor and the bar's face.
 
-A scene (:class:`~hifumotion.particles.scene.BarConfig`, ``PhysicsConfig``), an observed
+A scene (:class:`~hifumotion.scene.BarConfig`, ``PhysicsConfig``), an observed
 experiment's ``setup.json`` (:class:`~hifumotion.observed.setup.BarSetup`) and the fitted model
 (:class:`~hifumotion.estimation.settings.ModelSettings`) default to these, so the three agree
 unless a user says otherwise. Light: reading it imports nothing.

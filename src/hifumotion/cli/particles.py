@@ -30,7 +30,7 @@ def simulate(
     from hifumotion.console import progress_fraction
     from hifumotion.io import output_folder, write_json
     from hifumotion.estimation.model import forward_model
-    from hifumotion.particles.scene import load_scene
+    from hifumotion.scene import load_scene
     from hifumotion.run_info import RunRecord
 
     scene = load_scene(scene_file, settings)

@@ -7,7 +7,7 @@ solves the same tissue — its particles as the voxels of a hexahedral mesh
 Kelvin–Voigt stress (:mod:`.hexahedra`) — by backward Euler with steps of the frame
 interval or longer (:mod:`.integrate`), the floor, the tank walls and the bar's end as
 rigid constraints with Coulomb friction (:mod:`.contact`). :func:`~.scene.simulate_creep`
-runs a :class:`~hifumotion.particles.scene.Scene` with it.
+runs a :class:`~hifumotion.scene.Scene` with it.
 """
 
 from hifumotion._lazy import lazy_exports

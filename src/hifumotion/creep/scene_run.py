@@ -1,11 +1,11 @@
-"""Run a :class:`~hifumotion.particles.scene.Scene` on the fast path.
+"""Run a :class:`~hifumotion.scene.Scene` on the fast path.
 
 The same scene file as the explicit path: its tank (the floor and the four walls are
 :class:`~.contact.ContactPlane` s with the scene's friction), its water (buoyancy up to the
 water line), its tissue (its particles, which must lie on a lattice, become voxels) and
 its bar (a :class:`~.contact.Punch` with the scene's force schedule; a bar whose weight
 is not supported adds its weight less its buoyancy to the push). Returns the explicit
-path's :class:`~hifumotion.particles.simulate.SimulationResult`, so every consumer
+path's :class:`~hifumotion.scene.SimulationResult`, so every consumer
 (sections, the fit, the twin) takes either.
 """
 
@@ -21,8 +21,9 @@ from hifumotion.creep.contact import ContactPlane, Punch
 from hifumotion.creep.integrate import CreepMaterial, CreepResult, CreepSettings, CreepSolver, Surroundings
 from hifumotion.creep.conform import conform
 from hifumotion.creep.voxels import voxel_mesh
-from hifumotion.particles.scene import Scene, tissue_particles_mm, touching_tip
-from hifumotion.particles.simulate import SimulationResult
+from hifumotion.scene import Scene
+from hifumotion.particles.scene_system import tissue_particles_mm, touching_tip
+from hifumotion.scene import SimulationResult
 
 MM = 1e-3
 

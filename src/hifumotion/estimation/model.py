@@ -35,8 +35,8 @@ import numpy as np
 from hifumotion.errors import InputError
 from hifumotion.estimation.settings import INTEGRATORS, ModelSettings
 from hifumotion.particles.quasi_static import settling
-from hifumotion.particles.scene import (BYTES_PER_PARTICLE, BarConfig, ParticleConfig, PhysicsConfig, RunConfig,
-                                        Scene, TankConfig, TissueConfig, spacing_for_count, touching_tip)
+from hifumotion.scene import (BYTES_PER_PARTICLE, BarConfig, ParticleConfig, PhysicsConfig, RunConfig, Scene, TankConfig, TissueConfig)
+from hifumotion.particles.scene_system import spacing_for_count, touching_tip
 from hifumotion.resources import check_memory
 from hifumotion import paper
 

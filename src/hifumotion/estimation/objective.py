@@ -45,7 +45,7 @@ import numpy as np
 from scipy import ndimage
 
 from hifumotion.errors import InputError
-from hifumotion.particles.section import Plane
+from hifumotion.scene import Plane
 
 
 def signed_distance_px(mask: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ import numpy as np
 
 from hifumotion.errors import InputError
 from hifumotion.observed import Observed
-from hifumotion.particles.section import Plane
+from hifumotion.scene import Plane
 from hifumotion.reconstruction import Reconstruction, reconstruct
 from hifumotion.segmentation.sweep import SweepSegmentation, segment_sweep
 

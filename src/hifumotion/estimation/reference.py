@@ -19,7 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from hifumotion.estimation.objective import signed_distance_px
-from hifumotion.particles.section import Plane
+from hifumotion.scene import Plane
 
 
 @dataclass

@@ -27,7 +27,7 @@ from hifumotion.errors import InputError
 from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters
 from hifumotion.io.files import write_text
 from hifumotion.io.structured import read_structured
-from hifumotion.particles.section import Plane
+from hifumotion.scene import Plane
 from hifumotion.estimation.reference import ReferenceShape
 
 
@@ -180,7 +180,7 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
     The model is the one that was fitted: its particles, its contour points and the surface
     its voxels conform to (``model/tissue_surface.npz``; a folder written before that file
     existed runs an unconformed mesh, as it did then)."""
-    from hifumotion.particles.scene import load_scene, read_particles_csv
+    from hifumotion.scene import load_scene, read_particles_csv
 
     folder = Path(folder)
     pj = folder / "parameters.json"

@@ -25,7 +25,7 @@ from pydantic import Field, field_validator, model_validator
 from hifumotion.config import ConfigModel, read_config_file, validate_config
 from hifumotion.errors import InputError
 from hifumotion.resources import MAX_FRAMES
-from hifumotion.particles.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
+from hifumotion.scene import BarConfig, PhysicsConfig, TankConfig, TissueMaterial
 from hifumotion.numerics import (CFL, QUASI_STATIC_MASS_SCALING, QUASI_STATIC_MAX_STEP_S, SUPPORT_FACTOR,
                                   TRUTH_STEP_S, TRUTH_TOLERANCE_MM)
 from hifumotion import paper

@@ -18,7 +18,7 @@ import numpy as np
 
 from hifumotion.errors import InputError
 from hifumotion.experiment.blob import Blob
-from hifumotion.particles.simulate import SimulationResult
+from hifumotion.scene import SimulationResult
 from hifumotion.reference.creep_fe import CreepFESettings, CreepFESolution, CreepingTissue, creep_reference
 
 
@@ -89,7 +89,7 @@ def simulate_fe_truth(cfg, blob: Blob, lattice_mm: np.ndarray, spacing_mm: float
                       folder: str | Path | None = None, progress: Callable[[float], None] | None = None
                       ) -> tuple[SimulationResult, CreepFESolution]:
     """Run the sample's push by finite elements; the lattice ``lattice_mm`` (rest, tank frame)
-    moved by it frame by frame, as a :class:`~hifumotion.particles.simulate.SimulationResult`."""
+    moved by it frame by frame, as a :class:`~hifumotion.scene.SimulationResult`."""
     problem, lift = fe_problem(cfg, blob, placement_mm)
     im = cfg.imaging
     times = np.arange(im.frames) / im.frame_rate_hz

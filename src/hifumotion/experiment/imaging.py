@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 from hifumotion.experiment.config import ImagingConfig
 from hifumotion.imaging.bmode import BModeImage, BModeOptions, Scatterers, Transducer, simulate_frame
 from hifumotion.particles.kernels import kernel
-from hifumotion.particles.section import Plane
+from hifumotion.scene import Plane
 
 
 @dataclass(frozen=True)

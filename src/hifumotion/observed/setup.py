@@ -143,7 +143,7 @@ class PushSchedule(ConfigModel):
         return np.where(t >= 0, 1.0, 0.0)
 
     def schedule(self, peak_force_n: float) -> dict:
-        """The :class:`~hifumotion.particles.scene.BarConfig` fields of this shape at ``peak_force_n``
+        """The :class:`~hifumotion.scene.BarConfig` fields of this shape at ``peak_force_n``
         (travel control: the travel itself; no force is read)."""
         if self.control == "travel":
             return {"control": "travel", "schedule_times_s": list(self.times_s),

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hifumotion.observed.setup import Setup
-from hifumotion.particles.section import Plane
+from hifumotion.scene import Plane
 
 
 @dataclass(frozen=True)

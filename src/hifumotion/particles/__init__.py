@@ -8,7 +8,7 @@ SI units inside (m, kg, s, Pa, N). Modules: :mod:`.kernels` (cubic spline),
 
 from hifumotion.particles._numba import FLUID, RIGID, TISSUE, WALL
 from hifumotion.particles.elastic import TissueParameters
-from hifumotion.particles.rigid import RigidBody, piecewise_linear_schedule
+from hifumotion.particles.rigid import RigidBody
 from hifumotion.particles.solver import SimulationDiverged, Solver, SolverSettings
 from hifumotion.particles.system import (CouplingParameters, FluidParameters, ParticleSystem,
                                          build_system, lattice, tank_walls)
@@ -16,7 +16,7 @@ from hifumotion.particles.system import (CouplingParameters, FluidParameters, Pa
 __all__ = [
     "FLUID", "TISSUE", "RIGID", "WALL",
     "TissueParameters", "FluidParameters", "CouplingParameters",
-    "RigidBody", "piecewise_linear_schedule",
+    "RigidBody",
     "ParticleSystem", "build_system", "lattice", "tank_walls",
     "Solver", "SolverSettings", "SimulationDiverged",
 ]

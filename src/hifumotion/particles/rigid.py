@@ -18,9 +18,9 @@ reaction it meets.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
-
 import numpy as np
+
+from hifumotion.scene.schedule import ForceSchedule
 
 
 def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
@@ -51,18 +51,6 @@ def rotation_quaternion(rotation_vector: np.ndarray) -> np.ndarray:
         return np.array([1.0, 0.0, 0.0, 0.0])
     axis = rotation_vector / angle
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
-
-
-ForceSchedule = Callable[[float], float]
-
-
-def piecewise_linear_schedule(times_s, values) -> ForceSchedule:
-    """A schedule through ``(time s, value)`` points, held constant past both ends."""
-    t = np.asarray(times_s, float)
-    y = np.asarray(values, float)
-    if t.ndim != 1 or t.shape != y.shape or len(t) == 0 or np.any(np.diff(t) < 0):
-        raise ValueError("a schedule needs increasing times and as many values")
-    return lambda time: float(np.interp(time, t, y))
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Run a scene from start to output: build → settle → push → frames.
 
-1. :func:`~hifumotion.particles.scene.build_scene` places water, tissue, bar and walls;
+1. :func:`~hifumotion.particles.scene_system.build_scene` places water, tissue, bar and walls;
 2. settling: ``run.settle_s`` of damped motion under gravity with the bar held,
    so the water finds its hydrostatic pressure and the tissue rests on the floor;
 3. the clock is reset to t = 0, the bar released and pushed by its force schedule;
@@ -11,46 +11,15 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from hifumotion.particles.output import FrameWriter
-from hifumotion.particles.scene import Scene, build_scene, solver_settings
+from hifumotion.particles.scene_system import build_scene, solver_settings
+from hifumotion.scene import Scene, SimulationResult
 from hifumotion.particles.solver import Solver
-from hifumotion.particles.system import ParticleSystem
-
-
-@dataclass
-class SimulationResult:
-    """What a run produced.
-
-    Attributes
-    ----------
-    times_s
-        Frame times (s), the first being t = 0 after settling.
-    tissue_mm
-        ``(frames, n_tissue, 3)`` tissue particle positions (mm, tank frame).
-    tissue_volume_mm3
-        Rest volume of each tissue particle (mm³), for :func:`~hifumotion.particles.section.section`.
-    bar_centre_mm
-        ``(frames, 3)`` bar centre of mass (mm), NaN without a bar.
-    spacing_mm
-        Particle spacing (mm).
-    steps, facts
-        Number of solver steps after settling; the scene's facts (counts, masses).
-    """
-
-    times_s: np.ndarray
-    tissue_mm: np.ndarray
-    tissue_volume_mm3: np.ndarray
-    bar_centre_mm: np.ndarray
-    spacing_mm: float
-    steps: int
-    facts: dict = field(default_factory=dict)
-    system: ParticleSystem | None = None
 
 
 def simulate(scene: Scene, folder: str | Path | None = None,
@@ -59,7 +28,7 @@ def simulate(scene: Scene, folder: str | Path | None = None,
     """Run ``scene``; write VTU/PVD/CSV into ``folder`` (if given and ``run.write_vtu``).
 
     ``progress(fraction)`` is called after every frame; ``tissue_particles`` as in
-    :func:`~hifumotion.particles.scene.build_scene`.
+    :func:`~hifumotion.particles.scene_system.build_scene`.
     """
     system, facts = build_scene(scene, tissue_particles)
     run = scene.run

@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from hifumotion.errors import HifuError
-from hifumotion.numerics import CFL
+from hifumotion.numerics import CFL, EXPLICIT_MASS_SCALING, EXPLICIT_MAX_STEP_S
 from hifumotion.particles import elastic, fluid, viscosity
 from hifumotion.particles.kernels import cubic_w
 from hifumotion.particles.neighbours import CellGrid
@@ -89,9 +89,9 @@ class SolverSettings:
     """
 
     cfl: float = CFL
-    max_step_s: float = 1e-3
+    max_step_s: float = EXPLICIT_MAX_STEP_S
     min_step_s: float = 1e-9
-    mass_scaling: float = 1.0
+    mass_scaling: float = EXPLICIT_MASS_SCALING
     damping_per_s: float = 0.0
     frozen_axes: tuple[int, ...] = ()
     neighbour_skin: float = 0.15

@@ -4,7 +4,7 @@
 scenes and keeps the motion's modes (:func:`~.model.pod_basis`); :func:`reduced_from_runs` does
 the same from runs made elsewhere (on a cluster's cores); :func:`simulate_reduced` runs a
 scene's material, force or travel and friction on the model and returns the full path's
-:class:`~hifumotion.particles.simulate.SimulationResult`, so every consumer takes either.
+:class:`~hifumotion.scene.SimulationResult`, so every consumer takes either.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from hifumotion.creep.integrate import CreepResult
 from hifumotion.creep.scene_run import (bar_centres, creep_solver, output_times, scene_material, scene_punch,
                                     simulation_result, snapshot_run)
 from hifumotion.creep.settings import CreepSettings
-from hifumotion.particles.scene import Scene
-from hifumotion.particles.simulate import SimulationResult
+from hifumotion.scene import Scene
+from hifumotion.scene import SimulationResult
 from hifumotion.reduced.model import ReducedCreep, ReducedSettings, pod_basis
 
 
