@@ -198,6 +198,20 @@ def test_every_section_the_code_and_readme_cite_in_the_decisions_exists():
     assert not missing, missing
 
 
+
+def test_every_section_of_the_decisions_is_listed_under_a_topic():
+    """The record's "Topics" index lists each section once, by its heading, with a link whose
+    anchor is the heading's (GitHub's rule: lower case, punctuation dropped, spaces to hyphens)."""
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "decisions.md").read_text()
+    headings = [h for h in re.findall(r"^## (.+)$", text, flags=re.M) if h != "Topics"]
+    index = text.split("## Topics", 1)[1].split("\n## ", 1)[0]
+    links = re.findall(r"\[([^\]]+)\]\(#([^)]+)\)", index)
+    assert sorted(name for name, _ in links) == sorted(headings)
+    for name, anchor in links:
+        assert anchor == re.sub(r"[^\w\- ]", "", name.lower()).replace(" ", "-")
+
 def _settings_defaults() -> dict:
     """``(field, default) -> [(module:Class, literal?)]`` over every settings class in the package
     (pydantic models and dataclasses named *Settings/*Config/*Setup/…), read from the source."""
