@@ -44,7 +44,7 @@ def one_implicit(factor: float, preset: str, seed: int) -> dict:
     from hifumotion.experiment import twin_config
     from hifumotion.experiment.blob import Blob
     from hifumotion.experiment.twin import _seeds, resolution, truth_scene
-    from hifumotion.particles.scene_system import spacing_for_count
+    from hifumotion.scene.geometry import spacing_for_count
     from hifumotion.particles.section import displacement_at
 
     cfg = twin_config(preset, seed=seed, overrides={"imaging": {"frames": 101}})

@@ -40,7 +40,7 @@ def ellipsoid_surface(scene, subdivisions: int):
 def main() -> None:
     from hifumotion.creep.scene_run import scene_punch, simulate_creep, tissue_mesh
     from hifumotion.scene import Scene
-    from hifumotion.particles.scene_system import spacing_for_count, tissue_particles_mm
+    from hifumotion.scene.geometry import spacing_for_count, tissue_particles_mm
     from hifumotion.reference import PunchedTissue, punch_reference
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

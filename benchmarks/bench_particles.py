@@ -54,7 +54,7 @@ def fast_path(particles: int, push_s: float = 10.0) -> dict:
     from hifumotion.creep.scene_run import simulate_creep, tissue_mesh
     from hifumotion.experiment.config import TwinConfig
     from hifumotion.scene import Scene
-    from hifumotion.particles.scene_system import spacing_for_count, tissue_particles_mm
+    from hifumotion.scene.geometry import spacing_for_count, tissue_particles_mm
 
     twin = TwinConfig()
     scene = Scene()

@@ -5,7 +5,8 @@ import pytest
 
 from hifumotion.particles.elastic import TissueParameters
 from hifumotion.particles.solver import Solver, SolverSettings
-from hifumotion.particles.system import build_system, lattice
+from hifumotion.particles.system import build_system
+from hifumotion.scene.geometry import lattice
 
 DX = 1e-3
 

@@ -22,7 +22,7 @@ from hifumotion.creep.integrate import CreepMaterial, CreepResult, CreepSettings
 from hifumotion.creep.conform import conform
 from hifumotion.creep.voxels import voxel_mesh
 from hifumotion.scene import Scene
-from hifumotion.particles.scene_system import tissue_particles_mm, touching_tip
+from hifumotion.scene.geometry import tissue_particles_mm, touching_tip
 from hifumotion.scene import SimulationResult
 
 MM = 1e-3

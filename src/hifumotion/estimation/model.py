@@ -36,7 +36,7 @@ from hifumotion.errors import InputError
 from hifumotion.estimation.settings import INTEGRATORS, ModelSettings
 from hifumotion.particles.quasi_static import settling
 from hifumotion.scene import (BYTES_PER_PARTICLE, BarConfig, ParticleConfig, PhysicsConfig, RunConfig, Scene, TankConfig, TissueConfig)
-from hifumotion.particles.scene_system import spacing_for_count, touching_tip
+from hifumotion.scene.geometry import spacing_for_count, touching_tip
 from hifumotion.resources import check_memory
 from hifumotion import paper
 

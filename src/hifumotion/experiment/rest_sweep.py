@@ -29,7 +29,7 @@ from hifumotion.experiment.twin import (
     sweep_images,
 )
 from hifumotion.observed import Setup
-from hifumotion.particles.scene_system import bar_particles_mm
+from hifumotion.scene.geometry import bar_particles_mm
 from hifumotion.particles.section import mapped_section
 
 

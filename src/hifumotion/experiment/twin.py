@@ -40,7 +40,7 @@ from hifumotion.io.files import write_text
 from hifumotion.io.writers import write_contours_csv, write_masks_nifti, write_png_stack
 from hifumotion.observed import BarSetup, ImagingGeometry, Observed, PushSchedule, Setup, TankSetup, write_observed
 from hifumotion.scene import ParticleConfig, RunConfig, Scene, TissueConfig
-from hifumotion.particles.scene_system import spacing_for_count
+from hifumotion.scene.geometry import spacing_for_count
 from hifumotion.particles.quasi_static import settling as quasi_static_settling
 from hifumotion.particles.section import mapped_section
 from hifumotion.scene import SimulationResult

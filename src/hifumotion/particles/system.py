@@ -17,6 +17,7 @@ from hifumotion.particles._numba import FLUID, RIGID, TISSUE, WALL
 from hifumotion.particles.elastic import RestNeighbourhoods, TissueParameters, rest_neighbourhoods
 from hifumotion.particles.kernels import kernel_derivative
 from hifumotion.particles.rigid import RigidBody
+from hifumotion.scene.geometry import lattice
 
 
 
@@ -295,16 +296,6 @@ def build_system(*, spacing_m: float, support_factor: float = 2.0,
         density=np.full(len(xf), rho0), pressure=np.zeros(len(xf)), strain=np.zeros(len(xt)),
         deform=np.tile(np.eye(3), (len(xt), 1, 1)),
     )
-
-
-def lattice(lo_m, hi_m, spacing_m: float) -> np.ndarray:
-    """Points of a cubic lattice filling the box ``[lo, hi)`` (m), first point at lo + Δx/2."""
-    lo = np.asarray(lo_m, float)
-    hi = np.asarray(hi_m, float)
-    axes = [lo[a] + spacing_m * (0.5 + np.arange(max(int(round((hi[a] - lo[a]) / spacing_m)), 0)))
-            for a in range(3)]
-    grid = np.meshgrid(*axes, indexing="ij")
-    return np.stack([g.ravel() for g in grid], axis=1)
 
 
 def tank_walls(inner_lo_m, inner_hi_m, spacing_m: float, layers: int = 2,

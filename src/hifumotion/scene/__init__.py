@@ -1,8 +1,8 @@
 """The experiment as data, shared by every path: the scene (tank, tissue, bar, physics, run;
-:mod:`.config`), the bar's program (:mod:`.schedule`), what a forward run produced
-(:mod:`.result`) and an imaging plane (:mod:`.plane`). Light: importing it loads no solver;
-the particle path (:mod:`hifumotion.particles`), the fast path (:mod:`hifumotion.creep`) and the
-truths (:mod:`hifumotion.reference`) build on it.
+:mod:`.config`), its solids as points (:mod:`.geometry`), the bar's program (:mod:`.schedule`),
+what a forward run produced (:mod:`.result`) and an imaging plane (:mod:`.plane`). Light:
+importing it loads no solver; the particle path (:mod:`hifumotion.particles`), the fast path
+(:mod:`hifumotion.creep`) and the truths (:mod:`hifumotion.reference`) build on it.
 """
 
 from hifumotion.scene.config import (BYTES_PER_PARTICLE, MAX_FORCE_N, BarConfig, ParticleConfig, PhysicsConfig,
