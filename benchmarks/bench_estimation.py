@@ -88,7 +88,7 @@ def _twin_settings(twin: Path) -> dict:
 
 
 def observe(twin: Path, training: str, tracking: str, offset_mm: float, fill_bar_cap: bool = True,
-            continue_bloom: bool = False):
+            bloom_continuation: str = "reconstruction"):
     """The observation of ``twin`` (timed) and the frames of the paper's protocol."""
     from hifumotion.estimation.prepare import prepare
     from hifumotion.estimation.protocol import default_frames
@@ -100,7 +100,7 @@ def observe(twin: Path, training: str, tracking: str, offset_mm: float, fill_bar
     contours = _expert_contours(twin / "truth", [0] + train, tmp / "expert.csv") if training == "expert" else None
     t0 = time.perf_counter()
     obs = prepare(observed, contours, boundary_offset_mm=0.0 if contours else offset_mm, tracking=tracking,
-                  fill_bar_cap=fill_bar_cap, continue_bloom=continue_bloom)
+                  fill_bar_cap=fill_bar_cap, bloom_continuation=bloom_continuation)
     return observed, obs, train, valid, time.perf_counter() - t0, tmp
 
 
@@ -305,7 +305,7 @@ def run_twin(twin: Path, args, offset_mm: float) -> dict:
     protocol = _twin_settings(twin).get("protocol", {}).get("name", "custom")
     observed, obs, train, valid, prep_s, tmp = observe(twin, args.training, args.tracking, offset_mm,
                                                        fill_bar_cap=not args.no_bar_cap,
-                                                       continue_bloom=args.bloom_continuation)
+                                                       bloom_continuation=args.bloom_continuation)
     out = {"twin": str(twin), "protocol": protocol, "motion": motion, "boundary_offset_mm": offset_mm,
            "prepare_s": prep_s, "training_frames": train, "validation_frames": valid,
            "ncc_validation": ncc_validation(observed, obs, truth, valid), "methods": {}}
@@ -421,8 +421,9 @@ def main() -> None:
                     help="also rank the physics and the surrogates on the last quarter of the training frames (the "
                     "physics calibrated again on the earlier ones) and score the winner: the product's choice")
     ap.add_argument("--no-bar-cap", action="store_true", help="do not continue the sweep's top under the bar")
-    ap.add_argument("--bloom-continuation", action="store_true",
-                    help="give frame 0's tracked target the strip the bar's bloom hides (EstimationConfig.bloom_continuation)")
+    ap.add_argument("--bloom-continuation", choices=("reconstruction", "image", "off"), default="reconstruction",
+                    help="what gives frame 0's tracked target the strip the bar's bloom hides "
+                         "(EstimationConfig.bloom_continuation; default: the product's)")
     ap.add_argument("--compare-search", action="store_true",
                     help="also calibrate with the other search model (reduced/implicit) and compare")
     ap.add_argument("--peer-set", default=None,

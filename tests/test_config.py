@@ -270,3 +270,15 @@ def test_the_settings_walk_sees_the_settings_it_checks():
                 "creep/settings.py:ReducedSettings", "estimation/settings.py:ModelSettings",
                 "estimation/settings.py:CalibrationSettings", "experiment/config.py:TruthConfig"):
         assert cls in seen
+
+
+def test_the_bloom_rule_defaults_to_the_reconstructions_and_reads_yes_and_no_as_before():
+    """``bloom_continuation`` names its rule; a yes/no written before the rules had names keeps its
+    meaning (yes: the strip continued, by the image's edge where no reconstruction decides it)."""
+    from hifumotion.workflow.pipeline import EstimationConfig
+
+    assert EstimationConfig().bloom_continuation == "reconstruction"
+    assert EstimationConfig(bloom_continuation=True).bloom_continuation == "image"
+    assert EstimationConfig(bloom_continuation=False).bloom_continuation == "off"
+    with pytest.raises(ValueError):
+        EstimationConfig(bloom_continuation="sometimes")

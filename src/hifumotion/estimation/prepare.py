@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from hifumotion.errors import InputError
+from hifumotion.estimation.settings import BLOOM_RULES, DEFAULT_BLOOM_RULE
 from hifumotion.observed import Observed
 from hifumotion.scene import Plane
 from hifumotion.reconstruction import Reconstruction, reconstruct
@@ -66,7 +67,7 @@ class Observation:
         (:class:`~hifumotion.observed.bar_cap.BarCap`); ``None`` when it was not asked for.
     bloom_continuation
         Whether frame 0's target was given the strip the bar's bloom hides (:func:`prepare`'s
-        ``continue_bloom``); the online loop segments frame 0 the same way.
+        ``bloom_continuation``); the online loop segments frame 0 the same way.
     bloom_continued_by
         What decided which of the strip's pixels are target: ``"reconstruction"`` (its top
         continued under the bar) or ``"image"`` (tissue at the bloom's edge); ``""`` without
@@ -180,7 +181,8 @@ def _fill_bar_cap(masks: np.ndarray, observed: Observed, boundary_offset_mm: flo
 
 def prepare(observed: Observed, contours_csv: str | Path | None = None, method: str = "glcv",
             progress: Progress | None = None, boundary_offset_mm: float = 0.0,
-            tracking: str = "speckle", fill_bar_cap: bool = True, continue_bloom: bool = False) -> Observation:
+            tracking: str = "speckle", fill_bar_cap: bool = True, bloom_continuation: str = DEFAULT_BLOOM_RULE
+            ) -> Observation:
     """Segment, reconstruct and track an observed experiment (module docstring).
 
     ``boundary_offset_mm``: how far outside the true boundary the imaging system's
@@ -193,13 +195,18 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     segmentation had to leave out (:func:`~hifumotion.observed.bar_cap.fill_under_bar`), so the
     reconstructed tissue touches the bar as the real one does.
 
-    ``continue_bloom``: with speckle tracking, give frame 0's target the strip the bar's bloom
-    hides where the reconstruction (its top continued under the bar, ``fill_bar_cap``) holds
-    tissue, so that the tracked frame 0 and the model's shape agree there; without a bar cap,
-    where tissue is seen at the bloom's edge (:func:`~hifumotion.speckle.segment_target`).
+    ``bloom_continuation`` (one of :data:`BLOOM_RULES`), with speckle tracking: what gives frame
+    0's target the strip the bar's bloom hides, so that the tracked frame 0 and the model's shape
+    agree there. ``"reconstruction"``: where the reconstruction (its top continued under the bar,
+    ``fill_bar_cap``) holds tissue; without a bar cap the strip stays cut. ``"image"``: the same,
+    and without a bar cap where tissue is seen at the bloom's edge
+    (:func:`~hifumotion.speckle.segment_target`). ``"off"``: the strip stays cut.
     """
     if tracking not in ("speckle", "glcv"):
         raise InputError(f"unknown tracking {tracking!r}; expected speckle or glcv", "tracking")
+    if bloom_continuation not in BLOOM_RULES:
+        raise InputError(f"unknown rule {bloom_continuation!r}; expected {', '.join(BLOOM_RULES)}",
+                         "bloom_continuation")
     tell = progress or (lambda stage, fraction: None)
     timings: dict[str, float] = {}
     sweep, rec, cap = _sweep_and_reconstruction(observed, method, fill_bar_cap, boundary_offset_mm, tell, timings)
@@ -208,8 +215,9 @@ def prepare(observed: Observed, contours_csv: str | Path | None = None, method: 
     if observed.initial_frame != 0:
         raise InputError("the initial contour must be on frame 0 to track the series", "initial_contour.csv")
     # with a bar cap, the reconstruction says where the bloom hides tissue at frame 0
-    shape = (_reconstruction_in_frame_plane(observed, rec) if tracking == "speckle" and continue_bloom
+    shape = (_reconstruction_in_frame_plane(observed, rec) if tracking == "speckle" and bloom_continuation != "off"
              and cap is not None and not cap.skipped else None)
+    continue_bloom = shape is not None or bloom_continuation == "image"
     masks, motion = _track_frames(observed, method, tracking, boundary_offset_mm, continue_bloom, shape)
     for frame, m in given.items():   # the user's contours replace the tracked ones where given
         masks[frame] = m

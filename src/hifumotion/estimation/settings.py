@@ -33,6 +33,13 @@ from hifumotion.rheology import RATE_FLOOR_PER_S
 #: The forward models (``estimation.model.FORWARD_MODELS``), by ``ModelSettings.integrator``.
 INTEGRATORS = ("implicit", "explicit", "reduced")
 
+#: What gives frame 0's target the strip the bar's bloom hides (:func:`prepare`): the
+#: reconstruction's top continued under the bar, also the image's bloom edge where there is no
+#: such top, or nothing.
+BLOOM_RULES = ("reconstruction", "image", "off")
+#: The rule a calibration uses unless told otherwise (docs/decisions.md, "Frame 0's target reaches the bar").
+DEFAULT_BLOOM_RULE = "reconstruction"
+
 
 def scheduler_address_problem(address: str) -> str | None:
     """Why ``address`` is not a Dask scheduler's address (``tcp://host:8786``, ``tls://…``,

@@ -36,7 +36,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from hifumotion.errors import InputError
-from hifumotion.estimation.settings import CalibrationSettings
+from hifumotion.estimation.settings import DEFAULT_BLOOM_RULE, CalibrationSettings
 
 if TYPE_CHECKING:      # the observed folder's reader pulls the image stack: imported where it runs
     from hifumotion.observed import Observed
@@ -57,7 +57,8 @@ class EstimationConfig(CalibrationSettings):
         "speckle", description="how the time series is observed: frame 0's contour carried by speckle tracking, or GLCV re-segmenting every frame (the paper)")
     boundary_offset_mm: float = Field(0.0, ge=-5, le=5, description="how far outside the true boundary the imaging system's segmentations lie (mm), measured on a phantom of known size; masks are moved inwards by it (0: none, as the paper)")
     horizons_frames: list[int] = Field([4, 6, 8], description="online mode: horizons in frames (empty: no online mode)")
-    bloom_continuation: bool = Field(False, description="speckle tracking: give frame 0's target the strip the bar's bloom hides (tissue pressed by the bar reaches it) where the reconstruction, its top continued under the bar, holds tissue — or, without that, where tissue is seen at the bloom's edge; it removes the tracked section's bias towards the side away from the bar (docs/decisions.md, \"Frame 0's target reaches the bar\")")
+    bloom_continuation: Literal["reconstruction", "image", "off"] = Field(
+        DEFAULT_BLOOM_RULE, description="speckle tracking: what gives frame 0's target the strip the bar's bloom hides (tissue pressed by the bar reaches it): reconstruction — where the reconstruction, its top continued under the bar, holds tissue (without that, the strip stays cut); image — also, without it, where tissue is seen at the bloom's edge; off — the strip stays cut. It removes the tracked section's bias towards the side away from the bar (docs/decisions.md, \"Frame 0's target reaches the bar\"); true and false read as image and off")
     online_loop: bool = Field(True, description="also run the online loop: every frame assimilated by the reduced model (its state and the push's size), t + k predicted (speckle tracking only)")
     prediction_band: bool = Field(True, description="also predict the aim one standard error either way along the direction the training frames fix least (two more runs of the model): aim.csv's band_mm, prediction.json's band, the report")
     @field_validator("horizons_frames")
@@ -68,6 +69,12 @@ class EstimationConfig(CalibrationSettings):
         if any(not 1 <= h <= MAX_FRAMES for h in v):
             raise ValueError(f"horizons are whole frames from 1 to {MAX_FRAMES:,} ahead, got {v}")
         return sorted(set(v))
+
+    @field_validator("bloom_continuation", mode="before")
+    @classmethod
+    def _bloom_rule(cls, v):
+        # a yes/no from a configuration written before the rules were named: yes was the image's rule
+        return {True: "image", False: "off"}.get(v, v) if isinstance(v, bool) else v
 
     choose_predictor: bool = Field(False, description="rank the physics and the predictors that know the same inputs (the drive surrogates, the Kalman filter, holding still) on the last quarter of the training frames, the physics calibrated again on the earlier ones (one more calibration), and record which the data support (prediction/choice.json, the scores, the report)")
 
@@ -132,7 +139,7 @@ def observe_and_calibrate(observed: Observed, folder: str | Path, settings: Esti
         shutil.copyfile(resume_log, log)
     with stage("observe: segment sweep, reconstruct, track"):
         observation = prepare(observed, contours_csv, progress=tell, boundary_offset_mm=s.boundary_offset_mm,
-                              tracking=s.tracking, continue_bloom=s.bloom_continuation)
+                              tracking=s.tracking, bloom_continuation=s.bloom_continuation)
     with stage("calibrate"):
         # the pipeline's training frames, parsed once for the series (EstimationConfig is a
         # CalibrationSettings: every other setting passes as it is)
