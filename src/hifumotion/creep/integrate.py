@@ -665,7 +665,7 @@ class CreepSolver:
         force = np.interp(times, st_t, np.array(saved_force))
         self.stats["advance_at_rest_mm"] = saved_adv[0] / MM
         parts = np.stack([self.mesh.particles(f) for f in nodes_mm])
-        return CreepResult(times, nodes_mm, parts, advance, force, dict(self.stats))
+        return CreepResult(times, nodes_mm, parts, advance, force)   # run() adds its stats
 
 
 __all__ = ["CreepMaterial", "Surroundings", "CreepSettings", "CreepResult", "CreepSolver"]
