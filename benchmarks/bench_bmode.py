@@ -19,11 +19,12 @@ Target: >= 20 frames/s for 256 x 256 on 2 cores.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
 import numpy as np
+
+from hifumotion.io.writers import json_text
 
 
 def speed(frames: int = 200) -> dict:
@@ -90,8 +91,7 @@ def main(argv=None) -> int:
     ap.add_argument("--phantoms", type=int, default=6)
     ap.add_argument("--frames", type=int, default=200)
     args = ap.parse_args(argv)
-    print(json.dumps({"speed": speed(args.frames), "presets": presets(args.phantoms), "pymust": pymust_comparison()},
-                     indent=2))
+    print(json_text({"speed": speed(args.frames), "presets": presets(args.phantoms), "pymust": pymust_comparison()}, indent=2))
     return 0
 
 

@@ -29,10 +29,11 @@ Runs one process per factor (two at a time on two cores; ``--workers 1`` to time
 from __future__ import annotations
 
 import argparse
-import json
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
+
+from hifumotion.io.writers import json_text
 
 
 def one_implicit(factor: float, preset: str, seed: int) -> dict:
@@ -156,7 +157,7 @@ def main() -> None:
             out["richardson"][f"section_centroid_y_mm_{t}s"] = richardson(
                 [r["section_centroid_mm"][t][1] for r in runs], factors)
             out["richardson"][f"bar_travel_mm_{t}s"] = richardson([r["bar_travel_mm"][t] for r in runs], factors)
-    print(json.dumps(out, indent=1))
+    print(json_text(out, indent=1))
 
 
 if __name__ == "__main__":

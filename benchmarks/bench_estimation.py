@@ -59,6 +59,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from hifumotion.io.writers import json_text
+
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -491,7 +493,7 @@ def main() -> None:
         out["summary"]["physics_against_the_surrogates"] = table
         for target in sorted({t for row in table.values() for t in row}):
             out["summary"][f"{target}_on_three_moving_twins"] = sum(row.get(target, False) for row in table.values()) >= 3
-    print(json.dumps(out, indent=1, default=float))
+    print(json_text(out, indent=1))
 
 
 if __name__ == "__main__":

@@ -22,10 +22,11 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
+
+from hifumotion.io.writers import json_text
 
 
 def ellipsoid_surface(scene, subdivisions: int):
@@ -104,8 +105,8 @@ def main() -> None:
         c, f = row["reference_coarse"], row["reference_fine"]
         row["reference_change_coarse_to_fine"] = abs(c["mean_descent_mm"] - f["mean_descent_mm"]) / f["mean_descent_mm"]
         out["runs"].append(row)
-        print(json.dumps(row), flush=True)
-    print(json.dumps(out, indent=1))
+        print(json_text(row, indent=None), flush=True)
+    print(json_text(out, indent=1))
 
 
 if __name__ == "__main__":

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hifumotion.io.writers import json_text
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
@@ -116,7 +118,7 @@ def main() -> None:
         own_turn_truth.append(np.round(split_difference(a0, a0 + u_true)["turn_vector_deg"], 2).tolist())
         size.append(float(np.sqrt((u_true ** 2).sum(1).mean()) * 1000))
         size_model.append(float(np.sqrt((u_model ** 2).sum(1).mean()) * 1000))
-    print(json.dumps({"twin": str(args.twin), "settings": changes, "seconds": round(seconds, 2),
+    print(json_text({"twin": str(args.twin), "settings": changes, "seconds": round(seconds, 2),
                       "boundary_offset_mm": offset_mm, "tissue_volume_mm3": round(obs.reconstruction.volume_mm3, 1),
                       "stats": {n: (round(v, 4) if isinstance(v, float) else v) for n, v in stats.items()},
                       "frames": frames, "rms_error_um": np.round(error, 1).tolist(),
@@ -129,7 +131,7 @@ def main() -> None:
                       "truth_turn_vector_deg": own_turn_truth,
                       "model_whole_sample_turn_vector_deg": body_turn,
                       "truth_rms_displacement_um": np.round(size, 1).tolist(),
-                      "model_rms_displacement_um": np.round(size_model, 1).tolist()}))
+                      "model_rms_displacement_um": np.round(size_model, 1).tolist()}, indent=None))
 
 
 if __name__ == "__main__":

@@ -52,6 +52,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hifumotion.io.writers import json_text
+
 #: The twins: overrides of the demo preset (0.3 mm pixels, 200 frames at 20 Hz). None is
 #: the default twin; each has its own seed, shape, bar and push.
 TWINS = {
@@ -492,7 +494,7 @@ def main(argv=None) -> int:
                                                  if n not in STRAIN_TWINS),
             "le_10ms_per_256x256_frame": out["targets"]["le_10ms_per_256x256_frame"],
         }
-    print(json.dumps(out, indent=2))
+    print(json_text(out, indent=2))
     return 0
 
 

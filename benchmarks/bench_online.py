@@ -57,6 +57,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
 
 import numpy as np
 
+from hifumotion.io.writers import json_text
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -271,7 +273,7 @@ def main() -> None:
         particles = args.particles or (1000 if args.quick else 4399)
         twins = [args.twin] if args.twin is not None else [twin_folder(args.work, n) for n in names]
         for t in twins:
-            print(json.dumps(reference_sensitivity(t, particles)), flush=True)
+            print(json_text(reference_sensitivity(t, particles), indent=None), flush=True)
         return
     if args.online:
         names = (args.cases.split(",") if args.cases else
@@ -282,9 +284,9 @@ def main() -> None:
         twins = [args.twin] if args.twin is not None else [twin_folder(args.work, n) for n in names]
         results = [run_online(t, particles, kinematics=args.kinematics) for t in twins]
         for r in results:
-            print(json.dumps(r), flush=True)
-        print(json.dumps({"summary": {"twins": len(results),
-                                      "all_targets_met": all(all(r["targets"].values()) for r in results)}}))
+            print(json_text(r, indent=None), flush=True)
+        print(json_text({"summary": {"twins": len(results),
+                                      "all_targets_met": all(all(r["targets"].values()) for r in results)}}, indent=None))
         return
     particles = args.particles or (1000 if args.quick else 4399)
     if args.twin is not None:
@@ -297,14 +299,14 @@ def main() -> None:
     results = []
     for twin in twins:
         results.append(run_twin(twin, particles, args.kinematics))
-        print(json.dumps(results[-1]), flush=True)
+        print(json_text(results[-1], indent=None), flush=True)
     summary = {"twins": len(results),
                "all_targets_met": all(all(r["targets"].values()) for r in results),
                "min_speedup_over_implicit": min(r["runs"][0]["speedup_over_implicit"] for r in results),
                "min_realtime_factor": min(r["runs"][0]["realtime_factor"] for r in results),
                "max_error_over_motion": max(x["error_over_motion"] or 0.0 for r in results for x in r["runs"]),
                "max_construction_s": max(r["construction_s"] for r in results)}
-    print(json.dumps({"summary": summary}), flush=True)
+    print(json_text({"summary": summary}, indent=None), flush=True)
 
 
 if __name__ == "__main__":

@@ -24,12 +24,12 @@ factorisations, the worst penetration, and the speed-up over the explicit path a
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import resource
 import sys
 import time
 from hifumotion import paper
+from hifumotion.io.writers import json_text
 
 
 def paper_scene(spacing_mm: float = 1.16):
@@ -132,7 +132,7 @@ def main(argv=None) -> dict:
         run["speedup_over_explicit"] = run["real_time_factor"] / out["real_time_factor"]
     out["fast_path"] = runs
     out["fast_path_targets"] = {"real_time_factor_at_4399": 10, "real_time_factor_at_1000": 50}
-    print(json.dumps(out, indent=None if args.json else 2))
+    print(json_text(out, indent=None if args.json else 2))
     return out
 
 

@@ -33,7 +33,6 @@ still's, their point error below holding still's and LK's; drift ≤ 1.3; ≤ 10
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -43,6 +42,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _tongue import DEFAULT_ROOT, LANDMARKS, TONGUE, Clip, clip_names, load_clips, point_to_polyline_px  # noqa: E402
+
+from hifumotion.io.writers import json_text
 
 #: The clips of ``--quick``: speech and swallow, scanner and screen-capture, 32–121 frames/s.
 QUICK = ("tongue_speech_AA11", "tongue_speech_coalstone", "tongue_swallow_P10", "tongue_swallow_P14",
@@ -216,8 +217,7 @@ def main(argv=None) -> int:
         per_clip[clip.name] = {tr: score_clip(clip, TRACKERS[tr]) for tr in trackers}
         row = {tr: round(per_clip[clip.name][tr]["all_px"], 2) for tr in trackers}
         print(f"{clip.name}: {row}", file=sys.stderr, flush=True)
-    print(json.dumps({"clips": per_clip, "summary": summarise(per_clip, trackers), "label_noise": label_noise(clips)},
-                     indent=1))
+    print(json_text({"clips": per_clip, "summary": summarise(per_clip, trackers), "label_noise": label_noise(clips)}, indent=1))
     return 0
 
 

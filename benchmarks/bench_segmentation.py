@@ -46,6 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hifumotion.io.writers import json_text
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
 
@@ -181,7 +183,7 @@ def main(argv=None) -> int:
     datasets = [d for d in args.datasets.split(",") if d]
     missing = [d for d in datasets if not (DATA / d / "init.json").is_file()]
     if missing:
-        print(json.dumps({"skipped": f"datasets not found under {DATA}: {missing}"}))
+        print(json_text({"skipped": f"datasets not found under {DATA}: {missing}"}, indent=None))
         return 0
     methods = [m for m in args.methods.split(",") if m]
     peers = [] if args.no_peers else (list(PEERS) if args.peers is None else [p for p in args.peers.split(",") if p])
@@ -244,7 +246,7 @@ def main(argv=None) -> int:
             summary["results"][f"{d}/{kind}"] = block
     if args.rows:
         args.rows.write_text(json.dumps(rows, indent=1))
-    print(json.dumps(summary, indent=2))
+    print(json_text(summary, indent=2))
     return 0
 
 

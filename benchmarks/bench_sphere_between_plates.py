@@ -12,11 +12,12 @@ printed (JSON): the bar's advance over 2δ at each R/Δx.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 
 import numpy as np
+
+from hifumotion.io.writers import json_text
 
 
 def main() -> None:
@@ -55,8 +56,8 @@ def main() -> None:
         rows.append({"spacing_mm": dx, "radius_over_spacing": r_mm / dx, "voxels": len(pts),
                      "advance_mm": float(result.advance_mm[-1]), "hertz_two_delta_mm": 2 * delta * 1e3,
                      "ratio": float(result.advance_mm[-1] / (2 * delta * 1e3)), "seconds": time.perf_counter() - t0})
-        print(json.dumps(rows[-1]), flush=True)
-    print(json.dumps({"force_n": force, "runs": rows}, indent=1))
+        print(json_text(rows[-1], indent=None), flush=True)
+    print(json_text({"force_n": force, "runs": rows}, indent=1))
 
 
 if __name__ == "__main__":

@@ -27,13 +27,14 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 from bench_segmentation import method_spec as parse_method  # "glcv+plane_start=neighbour"
+
+from hifumotion.io.writers import json_text
 
 #: The twins: (preset, overrides). Seeds, shapes, pixel sizes, plane gaps and bars differ.
 TWINS: dict[str, tuple[str, dict]] = {
@@ -159,7 +160,7 @@ def main(argv=None) -> int:
     except InputError as err:
         print(f"bench_sweep: {err}", file=sys.stderr)
         return 2
-    print(json.dumps({"benchmark": "sweep", "methods": methods, "twins": rows, "summary": summary(rows, methods),
+    print(json_text({"benchmark": "sweep", "methods": methods, "twins": rows, "summary": summary(rows, methods),
                       "seconds": time.perf_counter() - t0}, indent=1))
     return 0
 

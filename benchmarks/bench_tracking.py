@@ -17,12 +17,13 @@ Target: <= 5 ms per 256 x 256 frame (``ms_per_frame_wall``).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
 import numpy as np
 from scipy import ndimage
+
+from hifumotion.io.writers import json_text
 
 
 def cine(frames: int, seed: int = 0, size: int = 256):
@@ -92,7 +93,7 @@ def main(argv=None) -> int:
                                   "dsc_mean": round(float(np.mean(peer_dsc)), 4)},
     }
     out["speed_ratio_vs_peer"] = round(out["peer_skimage_morph_cv"]["ms_per_frame_median"] / out["ms_per_frame_wall"], 2)
-    print(json.dumps(out, indent=2))
+    print(json_text(out, indent=2))
     return 0
 
 

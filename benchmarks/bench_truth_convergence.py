@@ -39,6 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hifumotion.io.writers import json_text
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 VARIANTS = ("mesh", "penalty", "slip", "step")
@@ -152,8 +154,8 @@ def main() -> None:
                 "settled_frame0_rms_um": round(float(np.sqrt(((positions[0] - stored[0]) ** 2).sum(1).mean()) * 1000), 1),
                 "rms_over_motion_at_last": round(splits[-1]["rms_um"] / max(motion[-1], 1e-9), 4)}
             # each variant as it ends (a long run's first results are not lost to its last)
-            print(json.dumps({"variant": variant, **out["variants"][variant]}), file=sys.stderr, flush=True)
-    print(json.dumps(out, indent=1))
+            print(json_text({"variant": variant, **out["variants"][variant]}, indent=None), file=sys.stderr, flush=True)
+    print(json_text(out, indent=1))
 
 
 if __name__ == "__main__":

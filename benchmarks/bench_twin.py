@@ -23,13 +23,14 @@ physics, not segmentation.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from hifumotion.io.writers import json_text
 
 
 def _centroids(masks: np.ndarray, pixel_mm: float) -> np.ndarray:
@@ -92,11 +93,11 @@ def main(argv=None) -> dict:
                                    "wall_s_compared": time.perf_counter() - t0,
                                    **compare(reference, other, probe)}
     if args.json:
-        print(json.dumps(out))
+        print(json_text(out, indent=None))
     else:
         brief = {k: ({kk: vv for kk, vv in v.items() if kk != "dsc_per_frame"} if isinstance(v, dict) else v)
                  for k, v in out.items()}
-        print(json.dumps(brief, indent=2))
+        print(json_text(brief, indent=2))
     return out
 
 

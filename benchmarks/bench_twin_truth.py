@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hifumotion.io.writers import json_text
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
@@ -77,7 +79,7 @@ def main() -> None:
         "truth_mean_descent_mm": float(-u_fe[last, :, 1].mean()),
         "fast_mean_descent_mm": float(-u_fast[last, :, 1].mean()),
     }
-    print(json.dumps(out, indent=2))
+    print(json_text(out, indent=2))
 
 
 if __name__ == "__main__":

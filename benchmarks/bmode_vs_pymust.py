@@ -16,11 +16,12 @@ contrast in dB (expected -5.2 dB), and seconds per frame.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
 import numpy as np
+
+from hifumotion.io.writers import json_text
 
 DEPTH0_M, WIDTH_M, DEPTH_M = 0.012, 0.02, 0.026
 DISC_Z_M, DISC_R_M, DISC_POWER = 0.025, 0.004, 0.3
@@ -91,14 +92,14 @@ def main(argv=None) -> int:
     try:
         import pymust  # noqa: F401
     except ImportError:
-        print(json.dumps({"skipped": "pymust is not installed; pip install pymust to run this comparison"}))
+        print(json_text({"skipped": "pymust is not installed; pip install pymust to run this comparison"}, indent=None))
         return 0
     pm = run_pymust(args.scatterers, args.seed)
     ours = run_ours(args.seed, pm["center_frequency_mhz"])
     out = {"expected": {"background_mean_over_std": 1.913, "inclusion_contrast_db": round(10 * np.log10(DISC_POWER), 2)},
            "pymust": pm, "hifumotion": ours,
            "speedup": round(pm["seconds_per_frame"] / max(ours["seconds_per_frame"], 1e-9), 1)}
-    print(json.dumps(out, indent=2))
+    print(json_text(out, indent=2))
     return 0
 
 

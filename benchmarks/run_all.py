@@ -18,6 +18,8 @@ import sys
 import time
 from pathlib import Path
 
+from hifumotion.io.writers import json_text
+
 HERE = Path(__file__).resolve().parent
 
 #: Benchmark → the arguments of a quick run (the full run uses each script's defaults).
@@ -69,7 +71,7 @@ def main() -> None:
                          "result": last_json(proc.stdout)}
         if proc.returncode != 0:
             results[name]["error"] = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
-    print(json.dumps(results, indent=2))
+    print(json_text(results, indent=2))
 
 
 if __name__ == "__main__":

@@ -444,3 +444,25 @@ def test_a_byte_order_mark_is_no_content(tmp_path):
     init.write_text(json.dumps({"a.png": {"ellipse": {"cx": 5, "cy": 5, "a": 3, "b": 2, "angle_deg": 0}}}),
                     encoding="utf-8-sig")
     assert "a.png" in read_init_json(init)
+
+
+def test_json_is_standard_where_a_number_is_not_finite(tmp_path):
+    """RFC 8259 has no Infinity or NaN: a strict parser (constants refused) must read every file
+    hifumotion writes, a non-finite number coming back as null and every finite one unchanged."""
+    from hifumotion.io.writers import json_text, write_json
+
+    def strict(text):
+        def refuse(name):
+            raise ValueError(f"{name} is not JSON")
+        return json.loads(text, parse_constant=refuse)
+
+    data = {"inf": float("inf"), "nan": float("nan"), "neg": -np.inf, "kept": 0.125,
+            "numpy": np.float32(np.inf), "array": np.array([1.5, np.nan, 3.0]), "nested": [{"x": (np.inf, 2)}],
+            "int": np.int64(7), "flag": np.bool_(True), "path": tmp_path}
+    back = strict(write_json(tmp_path / "a.json", data).read_text())
+    assert back == {"inf": None, "nan": None, "neg": None, "kept": 0.125, "numpy": None,
+                    "array": [1.5, None, 3.0], "nested": [{"x": [None, 2]}], "int": 7, "flag": True,
+                    "path": str(tmp_path)}
+    assert strict(json_text([np.nan], indent=None)) == [None]
+    with pytest.raises(TypeError, match="object"):
+        json_text({"x": object()})

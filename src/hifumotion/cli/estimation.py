@@ -172,7 +172,6 @@ def online(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output folder."),
 ) -> None:
     """Run the online loop: each frame tracked, the reduced model and the push's size corrected by it, the aim for t + k written before the next frame."""
-    import json
     import sys
     import time
 
@@ -180,6 +179,7 @@ def online(
     from hifumotion.estimation.store import frame0_fingerprint, load_calibration
     from hifumotion.io import output_folder, write_json
     from hifumotion.io.files import write_text
+    from hifumotion.io.writers import json_text
     from hifumotion.observed import load_observed, read_initial_contour, read_setup
     from hifumotion.observed.solids import imaging_plane
     from hifumotion.prediction.online import OnlineSession, watch_frames
@@ -249,7 +249,7 @@ def online(
                         time.sleep(max(0.0, due - time.perf_counter()))
                     step = session.push(frame)
                     if stream:
-                        sys.stdout.write(json.dumps(step.as_dict()) + "\n")
+                        sys.stdout.write(json_text(step.as_dict(), indent=None) + "\n")
                         sys.stdout.flush()
                     progress("online", min(step.frame / max(setup.frames - 1, 1), 1.0))
         if not session.steps:

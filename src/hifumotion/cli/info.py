@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Optional
 
@@ -28,7 +27,9 @@ def info(
     seq = read_sequence(path, parse_spacing(spacing), frame_interval, kind=kind)  # type: ignore[arg-type]
     summary = seq.describe()
     if as_json:
-        typer.echo(json.dumps(summary, indent=2))
+        from hifumotion.io.writers import json_text
+
+        typer.echo(json_text(summary))
         return
     table = Table(title=str(path), show_header=False)
     for key, value in summary.items():

@@ -75,7 +75,9 @@ def validate(
         raise InputError(f"unknown case; choose from {', '.join(CASES)} or all", unknown[0])
     results = [run_case(n).to_dict() for n in names]
     if as_json:
-        typer.echo(json.dumps(results[0] if len(results) == 1 else results, indent=2, default=float))
+        from hifumotion.io.writers import json_text
+
+        typer.echo(json_text(results[0] if len(results) == 1 else results))
     else:
         for r in results:
             mark = "[green]passed[/green]" if r["passed"] else "[red]FAILED[/red]"

@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -203,17 +204,34 @@ def write_contours_json(path: str | Path, contours: Mapping[Any, Contour] | Sequ
 
 
 def write_json(path: str | Path, data: Any) -> Path:
-    """JSON, indented, numpy values converted, written atomically."""
-    return write_text(path, json.dumps(data, indent=2, default=_json_default) + "\n")
+    """JSON, indented, numpy values converted, written atomically (:func:`json_text`)."""
+    return write_text(path, json_text(data) + "\n")
 
 
-def _json_default(obj: Any) -> Any:
+def json_text(data: Any, indent: int | None = 2) -> str:
+    """``data`` as standard JSON (RFC 8259): numpy values and arrays, paths and pydantic models
+    converted, and a number that is not finite (an error no data bound, a predictor whose
+    section left the image) written ``null``. Python's own ``Infinity`` and ``NaN`` are not
+    JSON: JavaScript's and jq's parsers refuse the whole file on them."""
+    return json.dumps(_finite(data), indent=indent, allow_nan=False)
+
+
+def _finite(obj: Any) -> Any:
+    """``obj`` with every non-finite float made None and every other value JSON knows."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if obj is None or isinstance(obj, (str, bool, int)):
+        return obj
+    if isinstance(obj, dict):
+        return {(k if isinstance(k, str) else str(_finite(k))): _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
     if isinstance(obj, np.generic):
-        return obj.item()
+        return _finite(obj.item())
     if isinstance(obj, np.ndarray):
-        return obj.tolist()
+        return _finite(obj.tolist())
     if isinstance(obj, Path):
         return str(obj)
     if hasattr(obj, "model_dump"):
-        return obj.model_dump(mode="json")
+        return _finite(obj.model_dump(mode="json"))
     raise TypeError(f"cannot write {type(obj).__name__} as JSON")
