@@ -139,8 +139,10 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
         from hifumotion.prediction.choice import holdout_physics, rank_on_holdout
 
         t3 = time.perf_counter()
-        held = holdout_physics(obs, CalibrationSettings(method=method, training_frames=train, workers=workers,
-                                                        **(settings or {})), train, log_path=tmp / f"holdout_{method}.jsonl")
+        held, earlier = holdout_physics(obs, CalibrationSettings(method=method, training_frames=train, workers=workers,
+                                                                 **(settings or {})), train,
+                                        log_path=tmp / f"holdout_{method}.jsonl")
+        cal.compare_with_earlier(earlier)
         tracked = {f: obs.frame_masks[f] for f in range(n)}
         choice = rank_on_holdout(tracked, train, program, observed.frame_interval_s, float(observed.pixel_mm), held)
         choice_s = time.perf_counter() - t3
@@ -155,6 +157,7 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
         "calibration_settings": {"search_integrator": cal.search_spec.settings.integrator},
         "fitted": k.as_dict(), "recovered": recovered_parameters(cal.report(), k, params),
         "degeneracy": cal.degeneracy, "strategy": cal.record.as_dict(), "resolution_check": cal.resolution,
+        "holdout_shift": None if cal.holdout_shift is None else cal.holdout_shift.as_dict(),
         "physics": ev.physics, "baselines_validation": ev.baselines, "online": ev.online,
         "verdict": ev.physics["verdict"], "choice": ev.physics.get("choice"), "choice_s": choice_s,
         "predict_s": predict_s, "validation_window_s": window_s,

@@ -198,6 +198,15 @@ masks = "{folder / 'truth' / 'frames'}"
         rows = np.genfromtxt(chosen, delimiter=",", names=True, dtype=None, encoding="utf-8")
         assert set(rows["method"]) == {choice["winner"]} and len(rows) >= 2
     assert "the training frames' choice:" in (proc.stdout + proc.stderr).replace("\n", " ")
+    # the fit on the earlier frames qualifies what parameters.json calls determined
+    parameters = json.loads((out / "calibration" / "parameters.json").read_text())
+    shift = parameters["fit"]["holdout_shift"]
+    assert shift["earlier_frames"] == [choice["fit_frames"][0], choice["fit_frames"][-1]]
+    assert set(shift["shift"]) == set(parameters["fit"]["correlation"]["coordinates"])
+    for coordinate in shift["moved"]:
+        name = {"log_E": "youngs_modulus_pa", "nu": "poisson_ratio", "log_beta1": "beta1_pa_s_pow",
+                "beta2": "beta2", "log_mu": "friction"}[coordinate]
+        assert not parameters["parameters"][name]["determined"]
     kept = json.loads((out / "calibration" / "parameters.json").read_text())["fit"]["strategy"]["model_kept"]
     assert f"model kept (training cost, mm)</td><td>{kept} (search" in (out / "report" / "report.html").read_text()
     why = _check_in_browser(out / "report" / "report.html")

@@ -41,6 +41,7 @@ from hifumotion.estimation.protocol import default_frames, parse_frames
 from hifumotion.estimation.resolution import resolution_check
 from hifumotion.estimation.settings import CalibrationSettings
 from hifumotion.estimation.space import FRICTION_BOUNDS, FRICTION_NAME, SearchSpace
+from hifumotion.estimation.stability import HoldoutShift, holdout_shift
 from hifumotion.estimation.strategies import Assessment, SearchJob, SearchRecord, strategy_for
 
 log = logging.getLogger(__name__)
@@ -71,6 +72,21 @@ class Calibration:
     summary: dict | None = None     # parameters.json, once written
     resolution: dict | None = None  # the fit on twice the particles (CalibrationSettings.resolution_check)
     assessment: Assessment | None = None   # the Jacobian and residuals the uncertainty came from
+    holdout_shift: HoldoutShift | None = None   # the fit against the fit on the earlier training frames
+
+    def coordinates(self) -> dict:
+        """The fit's coordinates by name (:mod:`.space`: ln E, ν, ln β1, β2 and ln μ_f if fitted)."""
+        space = SearchSpace(force_n=self.parameters.force_n,
+                            friction=FRICTION_BOUNDS if FRICTION_NAME in self.std else None)
+        return dict(zip(space.names, space.theta(self.parameters).tolist()))
+
+    def compare_with_earlier(self, earlier: "Calibration") -> HoldoutShift:
+        """Compare this fit with ``earlier``, the same calibration on the earlier training frames
+        only (:mod:`.stability`); :meth:`report` then reports a coordinate that moved by more than
+        the earlier fit's errors allow as not determined, and says why."""
+        self.holdout_shift = holdout_shift(self.coordinates(), earlier.coordinates(), earlier.std,
+                                           earlier.training_frames)
+        return self.holdout_shift
 
     def caveats(self) -> list[str]:
         """Why the fit's uncertainties are not to be read as those of a converged fit: the search
@@ -127,6 +143,11 @@ class Calibration:
                 for name in entries:
                     if name in out:
                         out[name]["not_determined_because"] = "the fit lies on its search bound"
+        for coordinate in ([] if self.holdout_shift is None else self.holdout_shift.moved):
+            for name in _REPORTED_BY.get(coordinate, ()):
+                if name in out and out[name]["determined"]:
+                    out[name]["determined"] = False
+                    out[name]["not_determined_because"] = self.holdout_shift.reason(coordinate)
         if self.caveats():
             for entry in out.values():
                 if entry["determined"]:

@@ -195,13 +195,15 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
                           moved, RESOLVED_PX * pixel_mm)
 
 
-def holdout_physics(observation, settings, training, log_path=None, progress=None) -> dict[int, np.ndarray]:
+def holdout_physics(observation, settings, training, log_path=None, progress=None):
     """The physics' masks on the training frames, calibrated on the earlier ones only (the
     held-out ones its prediction).
 
     ``observation`` (:class:`~hifumotion.estimation.prepare.Observation`) and ``settings``
     (:class:`~hifumotion.estimation.settings.CalibrationSettings`) are the main calibration's;
-    only the training frames change. Costs one more calibration."""
+    only the training frames change. Costs one more calibration. Returns ``(frame → mask, the
+    calibration on the earlier frames)``: the main fit is compared with the latter
+    (:meth:`~hifumotion.estimation.calibrate.Calibration.compare_with_earlier`)."""
     from hifumotion.estimation.calibrate import calibrate
     from hifumotion.prediction.pipeline import predict_calibrated
 
@@ -209,7 +211,7 @@ def holdout_physics(observation, settings, training, log_path=None, progress=Non
     cal = calibrate(observation, settings.model_copy(update={"training_frames": fit}), log_path=log_path,
                     progress=progress)
     pred = predict_calibrated(cal.spec, cal.parameters, observation.reference_shape(), fit + held)
-    return {f: pred.masks[f] for f in fit + held if f in pred.masks}
+    return {f: pred.masks[f] for f in fit + held if f in pred.masks}, cal
 
 
 def write_chosen(folder, method: str, masks: dict[int, np.ndarray], frame_interval_s: float, pixel_mm: float) -> None:

@@ -214,13 +214,16 @@ def run_pipeline(observed: Observed | str | Path, out: str | Path, settings: Est
         with stage("choose the predictor"):
             from hifumotion.prediction.choice import holdout_physics, rank_on_holdout
 
-            held = holdout_physics(observation, s.model_copy(update={"training_frames": training}), training,
-                                   log_path=out / "calibration" / "holdout_search_log.jsonl", progress=tell)
+            held, earlier = holdout_physics(observation, s.model_copy(update={"training_frames": training}), training,
+                                            log_path=out / "calibration" / "holdout_search_log.jsonl", progress=tell)
             choice = rank_on_holdout({f: observation.frame_masks[f] for f in range(n)}, training, program,
                                      observed.frame_interval_s, float(observed.pixel_mm), held)
             write_json(folder / "choice.json", choice.as_dict())
-            # the ranking beside the parameters it qualifies and the prediction it may overrule
+            # the ranking beside the parameters it qualifies and the prediction it may overrule;
+            # the earlier frames' fit qualifies what the parameters call determined
             prediction_summary["choice"] = cal.summary["predictor_choice"] = choice.as_dict()
+            cal.summary["fit"]["holdout_shift"] = cal.compare_with_earlier(earlier).as_dict()
+            cal.summary["parameters"] = cal.report()
             write_json(folder / "prediction.json", prediction_summary)
             write_json(out / "calibration" / "parameters.json", cal.summary)
 
