@@ -464,5 +464,6 @@ def test_json_is_standard_where_a_number_is_not_finite(tmp_path):
                     "array": [1.5, None, 3.0], "nested": [{"x": [None, 2]}], "int": 7, "flag": True,
                     "path": str(tmp_path)}
     assert strict(json_text([np.nan], indent=None)) == [None]
+    assert strict(json_text({np.int64(20): np.inf}, indent=None)) == {"20": None}     # frame-numbered keys
     with pytest.raises(TypeError, match="object"):
         json_text({"x": object()})

@@ -223,7 +223,7 @@ def _finite(obj: Any) -> Any:
     if obj is None or isinstance(obj, (str, bool, int)):
         return obj
     if isinstance(obj, dict):
-        return {(k if isinstance(k, str) else str(_finite(k))): _finite(v) for k, v in obj.items()}
+        return {_key(k): _finite(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_finite(v) for v in obj]
     if isinstance(obj, np.generic):
@@ -235,3 +235,15 @@ def _finite(obj: Any) -> Any:
     if hasattr(obj, "model_dump"):
         return _finite(obj.model_dump(mode="json"))
     raise TypeError(f"cannot write {type(obj).__name__} as JSON")
+
+
+def _key(key: Any) -> Any:
+    """A mapping's key as JSON writes keys: numpy scalars as their Python value, a float that is
+    not finite as its name (a key cannot be null)."""
+    if isinstance(key, np.generic):
+        key = key.item()
+    if isinstance(key, float) and not math.isfinite(key):
+        return str(key)
+    if key is None or isinstance(key, (str, bool, int, float)):
+        return key
+    raise TypeError(f"cannot write a key of type {type(key).__name__} as JSON")
