@@ -74,3 +74,16 @@ def test_the_report_says_a_moved_value_is_not_determined_and_why():
     assert not report["poisson_ratio"]["determined"]
     assert "20–80" in report["poisson_ratio"]["not_determined_because"]
     assert report["force_over_youngs_m2"]["determined"]      # E did not move: still determined
+
+
+def test_the_report_says_which_value_moved_and_why():
+    from types import SimpleNamespace
+
+    from hifumotion.report.build import _parameter_parts
+
+    fit = _calibration(0.448, 0.006, range(20, 101, 10))
+    quiet = " ".join(_parameter_parts(SimpleNamespace(calibration=fit, truth_parameters=None)))
+    assert "whatever its standard error says" not in quiet
+    fit.compare_with_earlier(_calibration(0.480, 0.008, range(20, 81, 10)))
+    told = " ".join(_parameter_parts(SimpleNamespace(calibration=fit, truth_parameters=None)))
+    assert "whatever its standard error says: ν: it moves 4.0 standard errors" in told

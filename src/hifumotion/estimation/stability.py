@@ -27,6 +27,8 @@ import numpy as np
 #: how many of the earlier fit's standard errors a determined coordinate may move when the last
 #: training frames are added (the usual three-sigma consistency bound)
 LIMIT_SIGMA = 3.0
+#: each coordinate as the operator reads it (E and β1 are at the nominal force: F/E and β1/E)
+LABELS = {"log_E": "F/E", "nu": "ν", "log_beta1": "β1/E", "beta2": "β2", "log_mu": "the friction μ_f"}
 
 
 @dataclass(frozen=True)
@@ -94,4 +96,4 @@ def holdout_shift(theta: dict, earlier_theta: dict, earlier_std: dict, earlier_f
                         {n: float(earlier_std[n]) for n in names}, float(limit_sigma))
 
 
-__all__ = ["LIMIT_SIGMA", "HoldoutShift", "holdout_shift"]
+__all__ = ["LABELS", "LIMIT_SIGMA", "HoldoutShift", "holdout_shift"]

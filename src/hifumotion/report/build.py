@@ -140,6 +140,12 @@ def _parameter_parts(outcome) -> list[str]:
     caveats = cal.caveats()
     if caveats:
         parts.append(paragraph("No parameter is reported as determined by the data: " + "; ".join(caveats) + "."))
+    moved = [] if cal.holdout_shift is None else cal.holdout_shift.moved
+    if moved:
+        from hifumotion.estimation.stability import LABELS
+
+        parts.append(paragraph("Not determined whatever its standard error says: " + "; ".join(
+            f"{LABELS.get(name, name)}: {cal.holdout_shift.reason(name)}" for name in moved) + "."))
     if cal.degeneracy:
         rows = [[f"×{d['factor']:g}", d["cost_mm"]] for d in cal.degeneracy]
         if rows:
