@@ -369,6 +369,12 @@ def _tell(name: str, label: str, r: dict) -> None:
                      + (f", {(v['fit'] - v['truth']) / v['std']:+.1f}σ)" if v["std"] else ")")
                      for n, v in r["recovered"].items())
     print(f"    fit: {fits}", file=sys.stderr, flush=True)
+    online = [e for e in r.get("online", {}).values() if e.get("aim")]
+    if online:
+        aims = "; ".join(f"{e['horizon_ms']:.0f} ms " + ", ".join(
+            f"{m} {a['centroid_mean_mm']:.3f}" for m, a in e["aim"].items() if a.get("frames"))
+            for e in online)
+        print(f"    online aims vs truth (mm): {aims}", file=sys.stderr, flush=True)
     c = r.get("choice")
     if c and "chosen" in c:
         print(f"    choice: {c['sentence']}; on validation {c['chosen']} {c['validation'].get('centroid_mean_mm', float('nan')):.3f} mm, "
