@@ -101,34 +101,3 @@ def test_a_hold_out_that_does_not_move_leaves_the_choice_with_the_physics():
     moving = {f: disc((40 + 0.5 * f, 40)) for f in range(200)}
     r = rank_on_holdout(moving, training, travel, DT, PIXEL, physics={f: moving[f] for f in fit + held})
     assert r.informative and r.winner == r.order[0]
-
-
-def test_the_online_choice_follows_the_predictor_that_has_been_missing_least():
-    """Two predictors aim 3 frames ahead. A is exact until frame 60 and 1 mm off after; B is always
-    0.4 mm off. Judged on the frames already seen, A is taken while its misses are the smaller,
-    B once A's misses after 60 (seen from frame 60 on) outweigh its early exactness."""
-    from hifumotion.prediction.choice import prequential_aims
-
-    frames = range(5, 150)
-    seen = np.stack([np.linspace(0, 5, 160), np.zeros(160)], axis=1)
-    a = {f: seen[f] + (np.array([1.0, 0.0]) if f >= 60 else 0.0) for f in frames}
-    b = {f: seen[f] + np.array([0.0, 0.4]) for f in frames}
-    taken, source = prequential_aims({"physics": a, "surrogate": b}, seen, 3, memory_frames=10)
-    assert source[5] == "physics"                       # nothing judged yet: the default
-    assert all(source[f] == "physics" for f in range(9, 63))     # A judged exact up to frame f − 3 < 60
-    assert all(source[f] == "surrogate" for f in range(80, 150))
-    np.testing.assert_allclose(taken[100], b[100])
-
-
-def test_the_online_choice_uses_nothing_seen_after_the_frame_it_aims_from():
-    from hifumotion.prediction.choice import prequential_aims
-
-    rng = np.random.default_rng(0)
-    seen = rng.normal(size=(120, 2))
-    aims = {m: {f: rng.normal(size=2) for f in range(10, 120)} for m in ("physics", "surrogate", "no_motion")}
-    _, before = prequential_aims(aims, seen, 4, memory_frames=20)
-    later = seen.copy()
-    later[71:] = rng.normal(size=(49, 2)) * 10          # everything after frame 70 changed
-    _, after = prequential_aims(aims, later, 4, memory_frames=20)
-    assert all(before[f] == after[f] for f in range(10, 75))      # aims made at t ≤ 70
-    assert any(before[f] != after[f] for f in range(75, 120))

@@ -214,61 +214,6 @@ def holdout_physics(observation, settings, training, log_path=None, progress=Non
     return {f: pred.masks[f] for f in fit + held if f in pred.masks}, cal
 
 
-def prequential_aims(aims: dict, seen_mm: np.ndarray, horizon: int, memory_frames: float,
-                     default: str = "physics") -> tuple[dict[int, np.ndarray], dict[int, str]]:
-    """The online choice between predictors, made again at every frame from what has been seen.
-
-    The aim for frame f = t + ``horizon`` is made at t. At that moment the predictors' earlier aims
-    at this horizon whose frame g ≤ t has arrived can be judged against the section seen there;
-    the aim taken is that of the predictor whose judged aims missed least, each miss weighted
-    ``exp(−(t − g) / memory_frames)`` (a prequential choice [1]_: each aim judged on a frame it had
-    not seen, nothing from after t). Before any aim can be judged, ``default``'s is taken.
-
-    Parameters
-    ----------
-    aims
-        Predictor → {target frame f → ``(2,)`` its aim at f, made at f − ``horizon`` (mm)}.
-    seen_mm
-        ``(T, 2)`` the section centroid seen at every frame (tracked; NaN where none), mm.
-    horizon
-        The frames between an aim and its frame.
-    memory_frames
-        How far back the misses count (e-folding, frames).
-
-    Returns
-    -------
-    ``(f → the aim taken, f → the predictor it came from)`` for every f at which every predictor aims.
-
-    References
-    ----------
-    .. [1] A. P. Dawid, "Present position and potential developments: some personal views.
-           Statistical theory: the prequential approach", J. R. Stat. Soc. A 147(2), 278–292 (1984).
-    """
-    if not aims:
-        raise InputError("no predictor's aims to choose between", "aims")
-    if not memory_frames > 0:
-        raise InputError(f"the memory must be a positive number of frames, got {memory_frames}", "memory_frames")
-    seen = np.asarray(seen_mm, float)
-    names = sorted(aims)
-    frames = sorted(set.intersection(*(set(int(f) for f in aims[m]) for m in names)))
-    first = default if default in aims else names[0]
-    judged = [g for g in frames if g < len(seen) and np.isfinite(seen[g]).all()]
-    miss = {m: np.array([np.linalg.norm(np.asarray(aims[m][g], float) - seen[g]) for g in judged]) for m in names}
-    judged_at = np.array(judged, int)
-    taken, source = {}, {}
-    for f in frames:
-        now = f - int(horizon)
-        past = judged_at <= now
-        if past.any():
-            w = np.exp(-(now - judged_at[past]) / memory_frames)
-            cost = {m: float(np.sum(w * miss[m][past]) / np.sum(w)) for m in names}
-            pick = min(names, key=lambda m: (cost[m], m != first))
-        else:
-            pick = first
-        taken[f], source[f] = np.asarray(aims[pick][f], float), pick
-    return taken, source
-
-
 def write_chosen(folder, method: str, masks: dict[int, np.ndarray], frame_interval_s: float, pixel_mm: float) -> None:
     """The chosen predictor's sections into ``folder``: ``frames/frame_NNNN.png`` (0/255) and
     ``sections.csv`` (frame, time, the section's centroid in mm, the method) — what to aim at
@@ -291,4 +236,4 @@ def write_chosen(folder, method: str, masks: dict[int, np.ndarray], frame_interv
 
 
 __all__ = ["HELD_OUT_SHARE", "RESOLVED_PX", "HoldoutRanking", "holdout_physics", "holdout_split", "peer_masks",
-           "prequential_aims", "rank_on_holdout", "write_chosen"]
+           "rank_on_holdout", "write_chosen"]

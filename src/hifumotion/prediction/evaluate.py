@@ -14,9 +14,7 @@ One function, :func:`evaluate`, used by the end-to-end pipeline (``hifumotion de
 * the **online** mode: at each frame t, predict t + k from what was seen up to t — the
   physics re-anchored on the tracked frame t, holding frame t, the **NCC** template
   tracker's frame t, a Kalman filter over the last ten tracked frames and, with the
-  program, the surrogate updated at every frame (recursive least squares); and the **data's
-  choice** among their aims, made again at every frame from the aims already judged against
-  the tracked sections (:func:`~hifumotion.prediction.choice.prequential_aims`).
+  program, the surrogate updated at every frame (recursive least squares).
 """
 
 from __future__ import annotations
@@ -150,7 +148,7 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
         beside how far it falls behind the validation's best predictor.
     """
     from hifumotion.prediction.baselines import kalman_predict, ncc_track
-    from hifumotion.prediction.choice import peer_masks, prequential_aims
+    from hifumotion.prediction.choice import peer_masks
     from hifumotion.prediction.pipeline import online_predictions
     from hifumotion.prediction.surrogates import anchored_to_last, residual_corrected
 
@@ -189,8 +187,6 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
         from hifumotion.metrics import centroid
 
         physics_online = online_predictions(pred, spec, reference, tracked, list(horizons), now)
-        seen_c = np.array([centroid(m, pixel) if m.any() else (np.nan, np.nan) for m in tracked], float)
-        memory_frames = max(max(training) - min(training), 1)     # the online surrogate's memory
         ncc = ncc_track(images, tracked[0])
         if program is not None:
             surrogate, surrogate_aims = _online_surrogate(tracked, program, frame_interval_s, pixel, horizons,
@@ -216,10 +212,6 @@ def evaluate(pred, spec, reference, tracked: np.ndarray, images: np.ndarray, tru
                                              truth, pixel, targets)
                 aims["surrogate"] = {t + h: surrogate_aims[h][t] for t in now
                                      if t + h in targets and np.isfinite(surrogate_aims[h][t]).all()}
-            # the data's choice, made again at every frame from the aims already judged (causal)
-            chosen, source = prequential_aims(aims, seen_c, h, memory_frames)
-            aims["chosen"] = chosen
-            entry["chosen_from"] = {m: sum(1 for v in source.values() if v == m) for m in sorted(set(source.values()))}
             entry["aim"] = {name: aim_summary(a, truth, pixel, targets) for name, a in aims.items()}
             online[str(h)] = entry
     return Evaluation(table, physics, baselines, online, masks, physics_online)

@@ -212,8 +212,8 @@ def _baseline_parts(outcome, folder: Path) -> list[str]:
         methods = [m for m in ("physics", "no_motion", "ncc", "kalman", "surrogate")
                    if all(m in e for e in ev.online.values())]
         label = {"physics": "physics", "no_motion": "no motion", "ncc": "NCC", "kalman": "Kalman",
-                 "surrogate": "surrogate", "chosen": "the data's choice"}
-        aimed = [m for m in [*methods, "chosen"] if all(m in e.get("aim", {}) for e in ev.online.values())]
+                 "surrogate": "surrogate"}
+        aimed = [m for m in methods if all(m in e.get("aim", {}) for e in ev.online.values())]
         rows = []
         for h, e in sorted(ev.online.items(), key=lambda kv: int(kv[0])):
             rows.append([f"{e['horizon_frames']} frames ({e['horizon_ms']:.0f} ms)"]
@@ -229,13 +229,6 @@ def _baseline_parts(outcome, folder: Path) -> list[str]:
             parts.append(paragraph("The aim columns score where each predictor puts the centroid, before its "
                                    "mask rounds it to the pixel grid (a straight edge, such as the face on the "
                                    "floor, moves by whole rows): what the operator steers by."))
-        if "chosen" in aimed:
-            taken = "; ".join(f"{e['horizon_ms']:.0f} ms: " + ", ".join(
-                f"{label.get(m, m)} {n}" for m, n in e.get("chosen_from", {}).items())
-                for _, e in sorted(ev.online.items(), key=lambda kv: int(kv[0])))
-            parts.append(paragraph("The data's choice aims, at each frame, with the predictor whose earlier aims "
-                                   "at that horizon missed the tracked sections least (the older the miss, the "
-                                   f"less it counts): nothing from after the frame it aims from. Aims taken: {taken}."))
         parts.append(table(["horizon"] + [f"DSC {label[m]}" for m in methods]
                            + [f"centroid {label[m]} (mm)" for m in methods]
                            + [f"aim {label[m]} (mm)" for m in aimed], rows,
