@@ -87,3 +87,34 @@ def test_the_report_says_which_value_moved_and_why():
     fit.compare_with_earlier(_calibration(0.480, 0.008, range(20, 81, 10)))
     told = " ".join(_parameter_parts(SimpleNamespace(calibration=fit, truth_parameters=None)))
     assert "whatever its standard error says: ν: it moves 4.0 standard errors" in told
+
+
+def test_the_step_to_another_models_fit_is_that_models_least_squares_fit():
+    """Linear residuals r(θ) = Aθ − b: at the fit to b, the Gauss–Newton step on another model's
+    residuals (b′) lands on the least-squares fit to b′ — exactly, the model being linear."""
+    from hifumotion.estimation.resolution import parameter_shift
+
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(60, 3))
+    b, b2 = rng.normal(size=60), rng.normal(size=60)
+    here = np.linalg.lstsq(a, b, rcond=None)[0]
+    there = np.linalg.lstsq(a, b2, rcond=None)[0]
+    step = parameter_shift(a, (a @ here - b).reshape(6, 10), (a @ here - b2).reshape(6, 10))
+    np.testing.assert_allclose(here + step, there, atol=1e-12)
+    with pytest.raises(ValueError):
+        parameter_shift(a, np.zeros(59), np.zeros(59))
+
+
+def test_a_value_the_models_resolution_moves_is_not_determined():
+    from hifumotion.estimation.resolution import ResolutionCheck
+
+    check = ResolutionCheck((1000, 2000), (2.0, 1.6), np.zeros(3), 0.3, 2,
+                            parameter_shift={"nu": -0.021, "log_E": 0.02, "beta2": 5.0})
+    moved = check.moved({"nu": 0.006, "log_E": 0.01, "beta2": np.inf})
+    assert list(moved) == ["nu"] and moved["nu"] == pytest.approx(3.5)
+    fit = _calibration(0.448, 0.006, range(20, 101, 10))
+    fit.resolution = {**check.as_dict(), "moved_sigma": moved}
+    report = fit.report()
+    assert not report["poisson_ratio"]["determined"]
+    assert "twice the particles would fit it 3.5 standard errors away" in report["poisson_ratio"]["not_determined_because"]
+    assert report["force_over_youngs_m2"]["determined"]

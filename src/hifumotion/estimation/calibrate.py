@@ -143,6 +143,13 @@ class Calibration:
                 for name in entries:
                     if name in out:
                         out[name]["not_determined_because"] = "the fit lies on its search bound"
+        for coordinate, sigma in ((self.resolution or {}).get("moved_sigma") or {}).items():
+            for name in _REPORTED_BY.get(coordinate, ()):
+                if name in out and out[name]["determined"]:
+                    out[name]["determined"] = False
+                    out[name]["not_determined_because"] = (
+                        f"the model on twice the particles would fit it {sigma:.1f} standard errors away: the "
+                        "model's resolution, not the data, decides it (fit.resolution_check)")
         for coordinate in ([] if self.holdout_shift is None else self.holdout_shift.moved):
             for name in _REPORTED_BY.get(coordinate, ()):
                 if name in out and out[name]["determined"]:
@@ -180,7 +187,8 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         outcome = strategy_for(s).run(SearchJob(ev, s, search, final, driven, timings, tell))
     theta, unc = outcome.theta, outcome.assessment.uncertainty
     std = {n: float(v) for n, v in zip(space.names, unc.std)}   # inf: not seen by the data
-    resolution = (_resolution(outcome.model, space.parameters(theta), observation, frames, timings, tell)
+    resolution = (_resolution(outcome.model, space.parameters(theta), observation, frames, timings, tell,
+                              data, outcome.assessment.jacobian, space.names, std)
                   if s.resolution_check else None)
     return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), outcome.fit,
                        outcome.table1, outcome.record, outcome.assessment.degeneracy,
@@ -229,18 +237,21 @@ def _training_data(observation: Observation, s: CalibrationSettings, frames, poi
 
 
 def _resolution(model: ModelSpec, parameters: Parameters, observation: Observation, frames,
-                timings: dict, tell) -> dict:
-    """Step 4: the fit run again on twice the particles, with a warning where it is not resolved."""
+                timings: dict, tell, data: TrainingData, jacobian: np.ndarray, names, std: dict) -> dict:
+    """Step 4: the fit run again on twice the particles, with a warning where it is not resolved,
+    and the coordinates the finer model would move by more than three of their standard errors
+    (``moved_sigma``: :meth:`Calibration.report` reports them not determined)."""
     t0 = time.perf_counter()
     tell("resolution", 0.0)
-    check = resolution_check(model, parameters, observation, int(max(frames)))
+    check = resolution_check(model, parameters, observation, int(max(frames)), data=data, jacobian=jacobian,
+                             names=names)
     timings["resolution_check_s"] = time.perf_counter() - t0
     tell("resolution", 1.0)
     if not check.resolved:
         log.warning("the fitted model is not resolved: on %d particles its points A move %.2f mm from where "
                     "%d put them (more than a %.2f mm pixel); fit with more particles", check.particles[1],
                     check.largest_mm, check.particles[0], check.pixel_mm)
-    return check.as_dict()
+    return {**check.as_dict(), "moved_sigma": check.moved(std)}
 
 
 #: the fitted coordinate → the parameters.json entries its value and error give

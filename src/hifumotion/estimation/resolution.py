@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hifumotion.estimation.model import ModelSpec, Parameters, model_spec, run_model
+from hifumotion.estimation.objective import TrainingData, residuals_mm
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,9 @@ class ResolutionCheck:
     difference_mm: np.ndarray
     pixel_mm: float
     last_frame: int
+    #: coordinate → how far the finer model's fit lies from this one (a Gauss–Newton step on the
+    #: finer model's training residuals at the fit); None where no training data were given
+    parameter_shift: dict | None = None
 
     @property
     def largest_mm(self) -> float:
@@ -48,7 +52,19 @@ class ResolutionCheck:
     def as_dict(self) -> dict:
         return {"particles": list(self.particles), "spacing_mm": list(self.spacing_mm),
                 "last_frame": self.last_frame, "difference_mm": np.round(self.difference_mm, 4).tolist(),
-                "largest_mm": self.largest_mm, "pixel_mm": self.pixel_mm, "resolved": self.resolved}
+                "largest_mm": self.largest_mm, "pixel_mm": self.pixel_mm, "resolved": self.resolved,
+                "parameter_shift": self.parameter_shift}
+
+    def moved(self, std: dict, limit_sigma: float = 3.0) -> dict:
+        """Coordinate → its :attr:`parameter_shift` in its standard errors ``std``, for those it
+        moves by more than ``limit_sigma``: values the model's resolution, not the data, decides."""
+        shift = self.parameter_shift or {}
+        out = {}
+        for name, d in shift.items():
+            sd = float(std.get(name, np.inf))
+            if np.isfinite(sd) and sd > 0 and abs(d) > limit_sigma * sd:
+                out[name] = abs(d) / sd
+        return out
 
 
 def displacement_difference_mm(points_a_mm: np.ndarray, points_b_mm: np.ndarray) -> np.ndarray:
@@ -61,17 +77,39 @@ def displacement_difference_mm(points_a_mm: np.ndarray, points_b_mm: np.ndarray)
     return np.sqrt((d ** 2).sum(axis=-1).mean(axis=-1))
 
 
-def resolution_check(spec: ModelSpec, k: Parameters, observation, last_frame: int,
-                     factor: float = 2.0) -> ResolutionCheck:
+def parameter_shift(jacobian: np.ndarray, residuals_mm_here: np.ndarray, residuals_mm_there: np.ndarray) -> np.ndarray:
+    """``(p,)`` the Gauss–Newton step from a fit to where another model's residuals would put it:
+    ``−(JᵀJ)⁻¹ Jᵀ (r_there − r_here)`` (at a least-squares fit ``Jᵀ r_here`` vanishes, so the step
+    on the other model's residuals is the step on their difference). ``jacobian`` ``(N, p)`` of the
+    residuals (mm per coordinate unit), both residuals of ``N`` values."""
+    j = np.asarray(jacobian, float)
+    d = np.asarray(residuals_mm_there, float).ravel() - np.asarray(residuals_mm_here, float).ravel()
+    if j.ndim != 2 or j.shape[0] != d.size:
+        raise ValueError(f"a ({d.size}, p) Jacobian expected for {d.size} residuals, got {j.shape}")
+    return -np.linalg.lstsq(j, d, rcond=None)[0]
+
+
+def resolution_check(spec: ModelSpec, k: Parameters, observation, last_frame: int, factor: float = 2.0,
+                     data: TrainingData | None = None, jacobian: np.ndarray | None = None,
+                     names=()) -> ResolutionCheck:
     """The fitted model ``spec`` at ``k`` on its own lattice and on one with ``factor`` times the
     particles, frames 0 … ``last_frame`` (module docstring). A reduced model is checked on the
-    full model it reduces: a reduced model of the finer lattice would need its own snapshots."""
+    full model it reduces: a reduced model of the finer lattice would need its own snapshots.
+
+    With the fit's training ``data``, its ``jacobian`` and its coordinates' ``names``, also how
+    far the finer model would move the fit (:func:`parameter_shift`): the model's own error in
+    the parameters, which the fit's standard errors do not contain."""
     if not factor > 1.0:
         raise ValueError(f"the finer lattice needs more particles: factor {factor}")
     finer = model_spec(observation, replace(spec.settings, tissue_particles=int(round(factor * spec.settings.tissue_particles))))
-    runs = [run_model(m, k, last_frame, full=True).points_mm for m in (spec, finer)]
+    runs = [run_model(m, k, last_frame, full=True) for m in (spec, finer)]
+    shift = None
+    if data is not None and jacobian is not None:
+        here, there = (residuals_mm(r.points_mm, data, None, r.bar_centre_mm) for r in runs)
+        shift = dict(zip(names, parameter_shift(jacobian, here, there).tolist()))
     return ResolutionCheck((len(spec.tissue_mm), len(finer.tissue_mm)), (spec.spacing_mm, finer.spacing_mm),
-                           displacement_difference_mm(*runs), float(observation.pixel_mm), int(last_frame))
+                           displacement_difference_mm(*(r.points_mm for r in runs)), float(observation.pixel_mm),
+                           int(last_frame), shift)
 
 
-__all__ = ["ResolutionCheck", "resolution_check", "displacement_difference_mm"]
+__all__ = ["ResolutionCheck", "displacement_difference_mm", "parameter_shift", "resolution_check"]
