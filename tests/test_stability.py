@@ -105,16 +105,12 @@ def test_the_step_to_another_models_fit_is_that_models_least_squares_fit():
         parameter_shift(a, np.zeros(59), np.zeros(59))
 
 
-def test_a_value_the_models_resolution_moves_is_not_determined():
+def test_the_models_numerical_error_joins_the_datas_in_quadrature():
     from hifumotion.estimation.resolution import ResolutionCheck
 
     check = ResolutionCheck((1000, 2000), (2.0, 1.6), np.zeros(3), 0.3, 2,
-                            parameter_shift={"nu": -0.021, "log_E": 0.02, "beta2": 5.0})
-    moved = check.moved({"nu": 0.006, "log_E": 0.01, "beta2": np.inf})
-    assert list(moved) == ["nu"] and moved["nu"] == pytest.approx(3.5)
-    fit = _calibration(0.448, 0.006, range(20, 101, 10))
-    fit.resolution = {**check.as_dict(), "moved_sigma": moved}
-    report = fit.report()
-    assert not report["poisson_ratio"]["determined"]
-    assert "twice the particles would fit it 3.5 standard errors away" in report["poisson_ratio"]["not_determined_because"]
-    assert report["force_over_youngs_m2"]["determined"]
+                            parameter_shift={"nu": -0.008, "log_E": 0.02, "beta2": np.inf})
+    std = check.with_numerical_error({"nu": 0.006, "log_E": 0.01, "beta2": np.inf, "log_beta1": 0.3})
+    assert std["nu"] == pytest.approx(0.010)                     # 3-4-5
+    assert std["log_E"] == pytest.approx(np.hypot(0.01, 0.02))
+    assert std["beta2"] == np.inf and std["log_beta1"] == 0.3     # no shift: the data's alone

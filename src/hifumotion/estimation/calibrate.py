@@ -18,7 +18,9 @@
      run of the full model and the reduced model made again where they disagree; a second
      pass on the final model's own reduced model where it is finer.
 4. **Resolution** (``resolution_check``, off by default): the fit run again on twice the
-   particles (:mod:`.resolution`), with a warning where the points move by more than a pixel.
+   particles (:mod:`.resolution`), with a warning where the points move by more than a pixel;
+   how far that finer model would move each coordinate is the model's numerical error, added in
+   quadrature to the data's standard error (ASME V&V 20) before "determined" is read off it.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, fo
 from hifumotion.estimation.objective import TrainingData
 from hifumotion.estimation.prepare import Observation
 from hifumotion.estimation.protocol import default_frames, parse_frames
-from hifumotion.estimation.resolution import resolution_check
+from hifumotion.estimation.resolution import ResolutionCheck, resolution_check
 from hifumotion.estimation.settings import CalibrationSettings
 from hifumotion.estimation.space import FRICTION_BOUNDS, FRICTION_NAME, SearchSpace
 from hifumotion.estimation.stability import HoldoutShift, holdout_shift
@@ -70,7 +72,7 @@ class Calibration:
     failed_runs: int = 0            # forward runs that failed (logged, not used as data)
     objective: str = "contour"      # what was fitted (CalibrationSettings.objective resolved)
     summary: dict | None = None     # parameters.json, once written
-    resolution: dict | None = None  # the fit on twice the particles (CalibrationSettings.resolution_check)
+    resolution: dict | None = None  # the fit on twice the particles (CalibrationSettings.resolution_check); std_data: the errors before its numerical error was added
     assessment: Assessment | None = None   # the Jacobian and residuals the uncertainty came from
     holdout_shift: HoldoutShift | None = None   # the fit against the fit on the earlier training frames
 
@@ -143,13 +145,6 @@ class Calibration:
                 for name in entries:
                     if name in out:
                         out[name]["not_determined_because"] = "the fit lies on its search bound"
-        for coordinate, sigma in ((self.resolution or {}).get("moved_sigma") or {}).items():
-            for name in _REPORTED_BY.get(coordinate, ()):
-                if name in out and out[name]["determined"]:
-                    out[name]["determined"] = False
-                    out[name]["not_determined_because"] = (
-                        f"the model on twice the particles would fit it {sigma:.1f} standard errors away: the "
-                        "model's resolution, not the data, decides it (fit.resolution_check)")
         for coordinate in ([] if self.holdout_shift is None else self.holdout_shift.moved):
             for name in _REPORTED_BY.get(coordinate, ()):
                 if name in out and out[name]["determined"]:
@@ -187,10 +182,16 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         outcome = strategy_for(s).run(SearchJob(ev, s, search, final, driven, timings, tell))
     theta, unc = outcome.theta, outcome.assessment.uncertainty
     std = {n: float(v) for n, v in zip(space.names, unc.std)}   # inf: not seen by the data
-    resolution = (_resolution(outcome.model, space.parameters(theta), observation, frames, timings, tell,
-                              data, outcome.assessment.jacobian, space.names, std)
-                  if s.resolution_check else None)
-    return Calibration(space.parameters(theta), std, unc.determined, list(map(int, frames)), outcome.fit,
+    determined = dict(unc.determined)
+    resolution = None
+    if s.resolution_check:
+        check = _resolution(outcome.model, space.parameters(theta), observation, frames, timings, tell,
+                            data, outcome.assessment.jacobian, space.names)
+        resolution = {**check.as_dict(), "std_data": std}
+        # the model's numerical error joins the data's: what is determined is read off both
+        std = check.with_numerical_error(std)
+        determined = {n: bool(determined[n] and std[n] < fitting.RELEVANCE.get(n, np.inf)) for n in determined}
+    return Calibration(space.parameters(theta), std, determined, list(map(int, frames)), outcome.fit,
                        outcome.table1, outcome.record, outcome.assessment.degeneracy,
                        unc.correlation.round(3).tolist(), outcome.model, search, observation, ev.runs, timings,
                        ev.failed, objective, resolution=resolution, assessment=outcome.assessment)
@@ -237,10 +238,9 @@ def _training_data(observation: Observation, s: CalibrationSettings, frames, poi
 
 
 def _resolution(model: ModelSpec, parameters: Parameters, observation: Observation, frames,
-                timings: dict, tell, data: TrainingData, jacobian: np.ndarray, names, std: dict) -> dict:
+                timings: dict, tell, data: TrainingData, jacobian: np.ndarray, names) -> ResolutionCheck:
     """Step 4: the fit run again on twice the particles, with a warning where it is not resolved,
-    and the coordinates the finer model would move by more than three of their standard errors
-    (``moved_sigma``: :meth:`Calibration.report` reports them not determined)."""
+    and how far the finer model would move each coordinate (its numerical error)."""
     t0 = time.perf_counter()
     tell("resolution", 0.0)
     check = resolution_check(model, parameters, observation, int(max(frames)), data=data, jacobian=jacobian,
@@ -251,7 +251,7 @@ def _resolution(model: ModelSpec, parameters: Parameters, observation: Observati
         log.warning("the fitted model is not resolved: on %d particles its points A move %.2f mm from where "
                     "%d put them (more than a %.2f mm pixel); fit with more particles", check.particles[1],
                     check.largest_mm, check.particles[0], check.pixel_mm)
-    return {**check.as_dict(), "moved_sigma": check.moved(std)}
+    return check
 
 
 #: the fitted coordinate → the parameters.json entries its value and error give

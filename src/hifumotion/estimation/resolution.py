@@ -55,16 +55,14 @@ class ResolutionCheck:
                 "largest_mm": self.largest_mm, "pixel_mm": self.pixel_mm, "resolved": self.resolved,
                 "parameter_shift": self.parameter_shift}
 
-    def moved(self, std: dict, limit_sigma: float = 3.0) -> dict:
-        """Coordinate → its :attr:`parameter_shift` in its standard errors ``std``, for those it
-        moves by more than ``limit_sigma``: values the model's resolution, not the data, decides."""
+    def with_numerical_error(self, std: dict) -> dict:
+        """Each coordinate's standard error ``std`` with the model's numerical error added in
+        quadrature, ``√(σ² + Δ²)``, Δ its :attr:`parameter_shift` (the validation uncertainty of
+        ASME V&V 20, u² = u_input² + u_num²: the data's error and the discretisation's, independent);
+        ``std`` unchanged where there is no shift."""
         shift = self.parameter_shift or {}
-        out = {}
-        for name, d in shift.items():
-            sd = float(std.get(name, np.inf))
-            if np.isfinite(sd) and sd > 0 and abs(d) > limit_sigma * sd:
-                out[name] = abs(d) / sd
-        return out
+        return {n: float(np.hypot(sd, shift[n])) if n in shift and np.isfinite(shift[n]) else float(sd)
+                for n, sd in std.items()}
 
 
 def displacement_difference_mm(points_a_mm: np.ndarray, points_b_mm: np.ndarray) -> np.ndarray:
