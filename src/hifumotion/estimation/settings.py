@@ -134,7 +134,9 @@ class CalibrationSettings(ConfigModel):
         False, description="run the fitted model at the fit again on twice the particles and report how far its "
                            "points A move apart over the training frames (parameters.json → fit.resolution_check; "
                            "a warning where it is more than a pixel: the model is too coarse for the fit to be "
-                           "trusted). Off by default: one run of the finer model, 2–5× the model's own")
+                           "trusted); how far the finer model would move each fitted value is added to its "
+                           "standard error in quadrature. Off by default: one run of the finer model, 2–5× the "
+                           "model's own")
     fit_friction: bool | None = Field(
         None, description="fit the friction of the floor and the bar's face (ln μ_f, 0.02 … 1) as a fifth "
                           "coordinate; unset: when the bar is driven (its slide is set by the friction), "
