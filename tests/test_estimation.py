@@ -738,12 +738,15 @@ def test_calibrate_predict_score_end_to_end(small_twin, tmp_path):
     for name in ("youngs_modulus_pa", "poisson_ratio", "beta1_pa_s_pow", "beta2", "external_force_n"):
         assert "value" in params["parameters"][name] and "determined" in params["parameters"][name]
     assert params["fit"]["runs"] > 5 and (cal / "search_log.jsonl").is_file()
-    # each standard error is the larger of the independent-point one and the frames' jackknife
+    # each standard error is the larger of the independent-point one and the frames' jackknife,
+    # with the resolution check's numerical error added in quadrature (the check is on here)
     errors = params["fit"]["correlation"]
-    for reported, independent, frames in zip(errors["std"], errors["std_independent_points"],
-                                             errors["std_frames_jackknife"]):
+    for name, reported, independent, frames in zip(errors["coordinates"], errors["std"],
+                                                   errors["std_independent_points"], errors["std_frames_jackknife"]):
         if reported is not None:
-            assert reported == pytest.approx(max(independent, frames), rel=1e-9)
+            data = max(independent, frames)
+            assert rc["std_data"][name] == pytest.approx(data, rel=1e-9)
+            assert reported == pytest.approx(np.hypot(data, rc["parameter_shift"][name]), rel=1e-9)
     # the observation as it was made: frame 0's target continued into the bar's bloom, as asked
     assert params["observation"]["bloom_continuation"] is True
     assert params["observation"]["bloom_continued_by"] in ("reconstruction", "image")
