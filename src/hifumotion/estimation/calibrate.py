@@ -190,7 +190,7 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
         resolution = {**check.as_dict(), "std_data": std}
         # the model's numerical error joins the data's: what is determined is read off both
         std = check.with_numerical_error(std)
-        determined = {n: bool(determined[n] and std[n] < fitting.RELEVANCE.get(n, np.inf)) for n in determined}
+        determined = {n: determined[n] and fitting.below_relevance(n, std[n]) for n in determined}
     return Calibration(space.parameters(theta), std, determined, list(map(int, frames)), outcome.fit,
                        outcome.table1, outcome.record, outcome.assessment.degeneracy,
                        unc.correlation.round(3).tolist(), outcome.model, search, observation, ev.runs, timings,

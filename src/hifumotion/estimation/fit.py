@@ -119,6 +119,12 @@ def cmaes_fit(ev: Evaluator, theta0: np.ndarray, max_generations: int = 12, pops
 RELEVANCE = {"log_E": 0.2, "nu": 0.05, "log_beta1": 0.2, "beta2": 0.2, "log_mu": 0.2}
 
 
+def below_relevance(name: str, std: float) -> bool:
+    """Whether a standard error ``std`` of coordinate ``name`` is below its :data:`RELEVANCE`
+    scale — the first condition for *determined*."""
+    return bool(std < RELEVANCE[name])
+
+
 @dataclass
 class Uncertainty:
     """Standard errors of the fitted coordinates and what the data determine."""
@@ -222,16 +228,15 @@ def uncertainty(ev: Evaluator, theta: np.ndarray, residuals_mm: np.ndarray | Non
     std = np.sqrt(var)
     d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
     corr = cov / np.outer(d, d)
-    scale = np.array([RELEVANCE[name] for name in ev.space.names])
     scaled_sv = np.linalg.svd(j * ev.space.steps, compute_uv=False)
     names = ev.space.names
     half_step = 0.5 * np.asarray(ev.space.steps, float)
     at = np.asarray(theta, float)
     bound = (at - np.asarray(ev.space.lower, float) < half_step) | (np.asarray(ev.space.upper, float) - at < half_step)
     return Uncertainty(std, corr, scaled_sv, float(np.sqrt(s2)),
-                       {name: bool(x < sc and not b) for name, x, sc, b in zip(names, std, scale, bound)},
+                       {name: below_relevance(name, x) and not b for name, x, b in zip(names, std, bound)},
                        np.sqrt(var_independent), np.sqrt(var_frames),
-                       {name: bool(x < sc) for name, x, sc in zip(names, np.sqrt(var_independent), scale)},
+                       {name: below_relevance(name, x) for name, x in zip(names, np.sqrt(var_independent))},
                        {name: bool(b) for name, b in zip(names, bound)})
 
 
@@ -247,5 +252,5 @@ def degeneracy(ev: Evaluator, theta: np.ndarray, factors=(0.5, 2.0)) -> list[dic
     return out
 
 
-__all__ = ["RELEVANCE", "FitResult", "initial_guess", "jacobian", "least_squares_fit", "cmaes_fit", "Uncertainty",
+__all__ = ["RELEVANCE", "below_relevance", "FitResult", "initial_guess", "jacobian", "least_squares_fit", "cmaes_fit", "Uncertainty",
            "frame_jackknife_covariance", "uncertainty", "degeneracy"]

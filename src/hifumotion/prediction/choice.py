@@ -195,7 +195,7 @@ def rank_on_holdout(tracked: dict, training, program: np.ndarray | None, frame_i
                           moved, RESOLVED_PX * pixel_mm)
 
 
-def holdout_physics(observation, settings, training, log_path=None, progress=None):
+def holdout_physics(observation, settings, training, log_path=None, progress=None) -> tuple[dict[int, np.ndarray], object]:
     """The physics' masks on the training frames, calibrated on the earlier ones only (the
     held-out ones its prediction).
 
