@@ -435,18 +435,21 @@ def main(argv=None) -> int:
     ap.add_argument("--large-motion", action="store_true",
                     help="the large-motion twins of bench_estimation (_estimation_twins.LARGE_MOTION_CASES, "
                          "made or re-used in --twins-work) and a push that strains the tissue 20–40 %% "
-                         "(STRAIN_TWINS), with their own targets")
+                         "(STRAIN_TWINS), with their own targets; a reversal twin (REVERSAL_CASES) when "
+                         "named in --twins")
     ap.add_argument("--twins-work", type=Path, default=Path(".bench") / "twins",
                     help="where --large-motion finds or makes its twins (bench_estimation's)")
     ap.add_argument("--pymust-frames", type=int, default=10)
     ap.add_argument("--pymust-scatterers", type=int, default=6000)
     args = ap.parse_args(argv)
     if args.large_motion:
-        from _estimation_twins import LARGE_MOTION_CASES
+        from _estimation_twins import LARGE_MOTION_CASES, REVERSAL_CASES
         from _estimation_twins import twin_folder as large_motion_folder
 
-        known = {**LARGE_MOTION_CASES, **STRAIN_TWINS}
-        names = [n for n in args.twins.split(",") if n] if args.twins != ",".join(TWINS) else list(known)
+        # by default the large-motion set; any driven twin of bench_estimation's when named
+        default = {**LARGE_MOTION_CASES, **STRAIN_TWINS}
+        known = {**default, **REVERSAL_CASES}
+        names = [n for n in args.twins.split(",") if n] if args.twins != ",".join(TWINS) else list(default)
     else:
         names, known = [n for n in args.twins.split(",") if n], TWINS
     unknown = [n for n in names if n not in known]
