@@ -117,7 +117,10 @@ def calibrate_and_predict(observed, obs, train, valid, truth, params, method, wo
     from hifumotion.prediction.pipeline import online_predictions, predict_calibrated
 
     t0 = time.perf_counter()
-    cal = calibrate(obs, CalibrationSettings(method=method, training_frames=train, workers=workers, **(settings or {})),
+    # no online session runs here (the online mode is scored by online_predictions): no online model
+    # unless --set asks for one, so calibration_s is the fit's alone
+    cal = calibrate(obs, CalibrationSettings(method=method, training_frames=train, workers=workers,
+                                             **{"online_model": False, **(settings or {})}),
                     log_path=tmp / f"log_{method}.jsonl")
     cal_s = time.perf_counter() - t0
     k = cal.parameters

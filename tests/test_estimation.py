@@ -1117,3 +1117,73 @@ def test_a_coordinate_fitted_on_its_search_bound_is_not_determined():
     assert unc.std[1] < 0.05                    # small by the errors alone: the bound is what decides
     assert not any(unc.at_bound[n] for n in ("log_E", "log_beta1", "beta2"))   # only ν is on a bound
 
+
+
+@pytest.mark.slow
+def test_a_saved_calibration_carries_the_online_models_runs(small_twin, tmp_path, monkeypatch):
+    """The calibration runs the online loop's reduced model's two full runs over the whole series
+    and saves them: loaded, the model's reduced model is made from them, with no full run, and
+    they are the runs the spec's own snapshot scenes give when run afresh here."""
+    import hifumotion.reduced.build as build
+    from hifumotion.config import validate_config
+    from hifumotion.creep.scene_run import snapshot_run
+    from hifumotion.estimation.store import load_calibration, read_reduced_snapshots
+    from hifumotion.observed import load_observed
+    from hifumotion.workflow.pipeline import EstimationConfig, observe_and_calibrate
+
+    folder, _ = small_twin
+    observed = load_observed(folder / "observed")
+    n = len(observed.frames)
+    train, _ = default_frames(n)
+    settings = validate_config(EstimationConfig, {"search_particles": 150, "max_evaluations": 1, "workers": 1,
+                                                  "search_integrator": "reduced", "particles": 150})
+    _, cal = observe_and_calibrate(observed, tmp_path / "cal", settings, train)
+    saved = cal.online_snapshots
+    assert saved is not None and saved.last_frame == n - 1 and len(saved.runs) == 2
+    assert all(len(r.times_s) == n for r in saved.runs)          # frames 0 … n − 1, the whole series
+    written = json.loads((tmp_path / "cal" / "parameters.json").read_text())
+    assert written["online_model"]["last_frame"] == n - 1 and written["online_model"]["runs"] == 2
+    assert "online_model_s" in written["timings_s"]
+
+    spec, k, _, _ = load_calibration(tmp_path / "cal")
+    # the runs afresh, in this process: the spec's snapshot scenes around the fit, to the last frame
+    fresh = [snapshot_run(scene, spec.voxels(), spec.tissue_volume_mm3, spec.settings.creep)
+             for scene in spec.snapshot_scenes(k, n - 1)]
+    read = read_reduced_snapshots(tmp_path / "cal" / "model" / "reduced_snapshots.npz")
+    for a, b in zip(read.runs, fresh):
+        assert np.allclose(a.times_s, b.times_s)
+        assert np.abs(a.nodes_mm - b.nodes_mm).max() < 1e-6 * max(1.0, np.abs(b.nodes_mm - b.nodes_mm[:1]).max())
+        assert np.abs(a.advance_mm - b.advance_mm).max() < 1e-6
+    # loaded, the reduced model comes from the saved runs: no full run is made for it
+    monkeypatch.setattr(build, "snapshot_run", lambda *a, **kw: pytest.fail("a full run was made"))
+    model = spec.reduced(k, n - 1)
+    reference = build.reduced_from_runs(spec.snapshot_scenes(k, n - 1)[0], spec.voxels(), fresh,
+                                        spec.settings.reduced, spec.settings.creep)
+    assert model.basis.size == reference.basis.size
+    assert np.allclose(model.basis.singular_values, reference.basis.singular_values, rtol=1e-6)
+    # asked for other parameters, or beyond the runs' last frame, it is not theirs: it makes its own
+    with pytest.raises(pytest.fail.Exception, match="a full run was made"):
+        spec.reduced(k.replaced(youngs_modulus_pa=2 * k.youngs_modulus_pa), n - 1)
+
+
+def test_saved_online_runs_that_are_not_whole_are_refused_by_name(tmp_path):
+    from hifumotion.creep.integrate import CreepResult
+    from hifumotion.estimation.model import ReducedSnapshots
+    from hifumotion.estimation.store import read_reduced_snapshots, write_reduced_snapshots
+
+    t = np.linspace(0.0, 1.0, 5)
+    nodes = np.random.default_rng(0).random((5, 7, 3))
+    run = CreepResult(t, nodes, np.zeros((5, 0, 3)), t * 0.1, t * 0.0, {"advance_at_rest_mm": 0.01, "steps": 3})
+    path = tmp_path / "reduced_snapshots.npz"
+    write_reduced_snapshots(path, ReducedSnapshots(Parameters(), 4, (run, run)))
+    back = read_reduced_snapshots(path)          # a round trip keeps every number
+    assert back.made_at == Parameters() and back.last_frame == 4 and len(back.runs) == 2
+    assert np.array_equal(back.runs[1].nodes_mm, nodes) and back.runs[0].stats["steps"] == 3
+    path.write_bytes(path.read_bytes()[:200])     # truncated
+    with pytest.raises(InputError, match="unreadable reduced model's runs") as err:
+        read_reduced_snapshots(path)
+    assert str(path) in str(err.value) or err.value.args[-1] == path
+    bad = CreepResult(t, nodes[:4], np.zeros((5, 0, 3)), t, t, {})      # a frame short
+    write_reduced_snapshots(path, ReducedSnapshots(Parameters(), 4, (bad,)))
+    with pytest.raises(InputError, match="one finite motion per frame"):
+        read_reduced_snapshots(path)

@@ -21,6 +21,10 @@
    particles (:mod:`.resolution`), with a warning where the points move by more than a pixel;
    how far that finer model would move each coordinate is the model's numerical error, added in
    quadrature to the data's standard error (ASME V&V 20) before "determined" is read off it.
+5. **The online model** (``online_model``, on by default): the fitted model's reduced model's
+   two full runs over the whole series, on the cluster's cores while it is up, kept with the
+   calibration (:class:`~.model.ReducedSnapshots`) and saved with it, so that the online loop
+   makes its model from them instead of running them before its first frame.
 """
 
 from __future__ import annotations
@@ -33,10 +37,11 @@ from typing import Callable
 
 import numpy as np
 
-from hifumotion.errors import InputError
+from hifumotion.errors import InputError, brief
 from hifumotion.estimation import fit as fitting
 from hifumotion.estimation.evaluator import Evaluator
-from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, forward_model, model_spec
+from hifumotion.estimation.model import (ModelSettings, ModelSpec, Parameters, ReducedSnapshots, forward_model,
+                                         model_spec)
 from hifumotion.estimation.objective import TrainingData
 from hifumotion.estimation.prepare import Observation
 from hifumotion.estimation.protocol import default_frames, parse_frames
@@ -75,6 +80,7 @@ class Calibration:
     resolution: dict | None = None  # the fit on twice the particles (CalibrationSettings.resolution_check); std_data: the errors before its numerical error was added
     assessment: Assessment | None = None   # the Jacobian and residuals the uncertainty came from
     holdout_shift: HoldoutShift | None = None   # the fit against the fit on the earlier training frames
+    online_snapshots: ReducedSnapshots | None = None   # the online loop's reduced model's runs (CalibrationSettings.online_model)
 
     def coordinates(self) -> dict:
         """The fit's coordinates by name (:mod:`.space`: ln E, ν, ln β1, β2 and ln μ_f if fitted)."""
@@ -161,9 +167,10 @@ class Calibration:
 def calibrate(observation: Observation, settings: CalibrationSettings | None = None,
               log_path: str | Path | None = None, progress: Callable[[str, float], None] | None = None
               ) -> Calibration:
-    """Steps 2–4 of the module docstring on a prepared observation: the training data and the
+    """Steps 2–5 of the module docstring on a prepared observation: the training data and the
     models, then the strategy (:func:`~.strategies.strategy_for`) on the search model's
-    evaluator, then the uncertainty it assessed and the resolution check."""
+    evaluator and the online model's runs, then the uncertainty it assessed and the resolution
+    check."""
     s = settings or CalibrationSettings()
     tell = progress or (lambda stage, fraction: None)
     timings: dict[str, float] = {}
@@ -180,6 +187,8 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
                    workers=s.workers, progress=on_run)
     with ev.cluster():
         outcome = strategy_for(s).run(SearchJob(ev, s, search, final, driven, timings, tell))
+        online = _online_snapshots(ev, outcome.model, space.parameters(outcome.theta), observation, timings, tell) \
+            if s.online_model else None
     theta, unc = outcome.theta, outcome.assessment.uncertainty
     std = {n: float(v) for n, v in zip(space.names, unc.std)}   # inf: not seen by the data
     determined = dict(unc.determined)
@@ -194,7 +203,8 @@ def calibrate(observation: Observation, settings: CalibrationSettings | None = N
     return Calibration(space.parameters(theta), std, determined, list(map(int, frames)), outcome.fit,
                        outcome.table1, outcome.record, outcome.assessment.degeneracy,
                        unc.correlation.round(3).tolist(), outcome.model, search, observation, ev.runs, timings,
-                       ev.failed, objective, resolution=resolution, assessment=outcome.assessment)
+                       ev.failed, objective, resolution=resolution, assessment=outcome.assessment,
+                       online_snapshots=online)
 
 
 def _prepare_search(observation: Observation, s: CalibrationSettings):
@@ -235,6 +245,26 @@ def _training_data(observation: Observation, s: CalibrationSettings, frames, poi
     if s.bar_motion and shift is not None and observation.observed.setup.bar.enabled:
         data = data.with_bar(shift, len(points_mm))
     return data, objective
+
+
+def _online_snapshots(ev: Evaluator, model: ModelSpec, k: Parameters, observation: Observation, timings: dict,
+                      tell) -> ReducedSnapshots | None:
+    """Step 5: the full runs the online loop's reduced model of the fitted ``model`` around ``k``
+    is made from, over the whole series, in parallel on the cluster: saved with the calibration,
+    they spare the online loop two full runs before its first frame. A failure costs the
+    calibration nothing: the online loop then runs them itself (said in one line)."""
+    t0 = time.perf_counter()
+    tell("online model", 0.0)
+    last = len(observation.frame_masks) - 1
+    try:
+        runs = ev.snapshot_runs(model, k, last)
+    except Exception as exc:       # noqa: BLE001 — the fit stands; only the online loop's head start is lost
+        log.warning("the online loop's reduced model was not made (%s); hifumotion online will make it", brief(exc))
+        return None
+    finally:
+        timings["online_model_s"] = time.perf_counter() - t0
+    tell("online model", 1.0)
+    return ReducedSnapshots(k, last, tuple(runs))
 
 
 def _resolution(model: ModelSpec, parameters: Parameters, observation: Observation, frames,

@@ -325,6 +325,17 @@ class Evaluator:
                                 "modes": int(model.basis.size)})
         return done - started
 
+    def snapshot_runs(self, spec: ModelSpec, k: Parameters, last_frame: int) -> list:
+        """The full runs ``spec``'s reduced model around ``k`` is made from (its
+        :meth:`~.model.ModelSpec.snapshot_scenes` to ``last_frame``), in parallel on the cluster's
+        cores; not counted among the search's runs."""
+        scenes = spec.snapshot_scenes(k, last_frame)
+        spec.voxels()        # made once here, sent with the spec
+        remote = self._client.scatter(spec, broadcast=True)
+        threads = max(1, self._cores // len(scenes))
+        futures = [self._client.submit(snapshot_task, remote, scene, threads, pure=False) for scene in scenes]
+        return self._client.gather(futures)
+
     def full_runs(self, thetas: list[np.ndarray], upto: int | None = None) -> list[np.ndarray]:
         """Residuals (mm) of runs of the full model at each ``θ``, in parallel on the cluster's cores,
         one thread each (uncached, logged as model ``"full"``); their nodes are kept (:attr:`snapshots`) for the

@@ -69,6 +69,17 @@ class KeptReduced:
     last_frame: int
 
 
+@dataclass(frozen=True)
+class ReducedSnapshots:
+    """The full runs a reduced model is made from (:meth:`ModelSpec.snapshot_scenes`, each a
+    :class:`~hifumotion.creep.integrate.CreepResult`), the parameters they were run around and the
+    last frame they reach: what a calibration saves so that the online loop need not run them."""
+
+    made_at: "Parameters"
+    last_frame: int
+    runs: tuple
+
+
 @dataclass
 class ModelSpec:
     """Everything a forward run needs, as plain data (mm, s)."""
@@ -83,6 +94,7 @@ class ModelSpec:
     surface_faces: np.ndarray | None = None
     _voxels: object = field(default=None, repr=False, compare=False)  # the fast path's mesh, made once
     _reduced: KeptReduced | None = field(default=None, repr=False, compare=False)   # made on first use, then kept
+    _offered: ReducedSnapshots | None = field(default=None, repr=False, compare=False)  # runs made elsewhere (saved)
 
     def voxels(self):
         """The fast path's conforming voxel mesh of the tissue (made on first use, then kept)."""
@@ -110,6 +122,11 @@ class ModelSpec:
         kept = self._reduced
         if kept is not None and kept.made_at == k and kept.last_frame >= last_frame:
             return kept.model
+        offered = self._offered
+        if (offered is not None and offered.last_frame >= last_frame and _same_parameters(offered.made_at, k)
+                and offered.runs[0].nodes_mm.shape[1] == len(self.voxels().nodes_mm)):
+            # its runs were made already (a calibration saved them): the model from them, as made then
+            return self.adopt_reduced(k, offered.last_frame, list(offered.runs))
         from hifumotion.reduced.build import reduced_creep
 
         model = reduced_creep(self.snapshot_scenes(k, last_frame), self.voxels(), self.tissue_volume_mm3,
@@ -137,6 +154,12 @@ class ModelSpec:
             return scenes
         return [scene_for(self, k.replaced(force_n=k.force_n * f), last_frame) for f in self.settings.reduced_span]
 
+    def offer_reduced(self, snapshots: ReducedSnapshots) -> None:
+        """Keep full runs made elsewhere (a saved calibration's): :meth:`reduced` makes its model
+        from them, not from runs of its own, when asked around the parameters they were made at
+        for no later frame than theirs."""
+        self._offered = snapshots
+
     def adopt_reduced(self, k: "Parameters", last_frame: int, runs: list) -> object:
         """Make and keep the reduced model around ``k`` from its snapshot runs made elsewhere
         (:func:`~hifumotion.creep.scene_run.snapshot_run` of each of :meth:`snapshot_scenes`, e.g. on a
@@ -147,6 +170,13 @@ class ModelSpec:
         model = reduced_from_runs(scenes[0], self.voxels(), runs, self.settings.reduced, self.settings.creep)
         self._reduced = KeptReduced(model, k, last_frame)
         return model
+
+
+def _same_parameters(a: "Parameters", b: "Parameters", rtol: float = 1e-9) -> bool:
+    """Whether two parameter sets are one (each value within ``rtol``: a set read back from
+    ``parameters.json`` is the one written, to the last digit JSON keeps)."""
+    da, db = a.as_dict(), b.as_dict()
+    return da.keys() == db.keys() and all(abs(da[n] - db[n]) <= rtol * max(abs(da[n]), abs(db[n])) for n in da)
 
 
 @dataclass
@@ -399,6 +429,6 @@ def _model_run(spec: ModelSpec, k: Parameters, sim, keep_frames, started: float)
                     time.perf_counter() - started)
 
 
-__all__ = ["Parameters", "ModelSettings", "ModelSpec", "KeptReduced", "ModelRun", "ForwardModel", "FORWARD_MODELS", "forward_model",
+__all__ = ["Parameters", "ModelSettings", "ModelSpec", "KeptReduced", "ReducedSnapshots", "ModelRun", "ForwardModel", "FORWARD_MODELS", "forward_model",
            "model_spec",
            "scene_for", "run_model", "run_snapshot"]

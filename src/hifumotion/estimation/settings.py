@@ -137,6 +137,11 @@ class CalibrationSettings(ConfigModel):
                            "trusted); how far the finer model would move each fitted value is added to its "
                            "standard error in quadrature. Off by default: one run of the finer model, 2–5× the "
                            "model's own")
+    online_model: bool = Field(
+        True, description="after the fit, run the fitted model's reduced model's two full runs (the snapshots the "
+                          "online loop's reduced model is made from) over the whole series, in parallel, and save "
+                          "them with the calibration (model/reduced_snapshots.npz): hifumotion online then makes "
+                          "its model from them in seconds instead of running them before its first frame")
     fit_friction: bool | None = Field(
         None, description="fit the friction of the floor and the bar's face (ln μ_f, 0.02 … 1) as a fifth "
                           "coordinate; unset: when the bar is driven (its slide is set by the friction), "

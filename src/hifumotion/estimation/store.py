@@ -8,6 +8,9 @@
     model/tissue_particles.csv
     model/contour_points.csv  the contour points A (tank mm)
     model/tissue_surface.npz  the reconstructed surface the model's voxels conform to (tank mm, float64)
+    model/reduced_snapshots.npz  the full runs the online loop's reduced model is made from (when
+                              the calibration made them: ``online_model``): each run's times (s),
+                              voxel nodes and bar advance (mm), its counts; the parameters and last frame
     observation/reference.npz the frame-0 shape: in-plane mask and the reconstruction's distance grid
     observation/frames/       the tracked (or given) masks of every frame, 0/255 PNG
     observation/sweep/        the sweep's masks
@@ -24,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from hifumotion.errors import InputError
-from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters
+from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, ReducedSnapshots
 from hifumotion.io.files import write_text
 from hifumotion.io.structured import read_structured
 from hifumotion.scene import Plane
@@ -77,6 +80,8 @@ def _write_model(cal, folder: Path) -> None:
     _csv(folder / "tissue_particles.csv", "x_mm,y_mm,z_mm,volume_mm3",
          np.column_stack([spec.tissue_mm, spec.tissue_volume_mm3]))
     _csv(folder / "contour_points.csv", "x_mm,y_mm,z_mm", spec.points_mm)
+    if cal.online_snapshots is not None:
+        write_reduced_snapshots(folder / "reduced_snapshots.npz", cal.online_snapshots)
     if spec.surface_vertices_mm is not None:
         # the model's voxels conform to this surface (ModelSpec.voxels): without it a loaded
         # calibration would run another mesh than the one that was fitted
@@ -128,6 +133,10 @@ def _summary(cal, folder: Path, observed_dir) -> dict:
                   "search_tissue_particles": int(len(cal.search_spec.tissue_mm)),
                   "search_spacing_mm": cal.search_spec.spacing_mm,
                   "search_integrator": cal.search_spec.settings.integrator},
+        # the online loop's reduced model's runs, saved (CalibrationSettings.online_model); null: not made
+        "online_model": None if cal.online_snapshots is None else {
+            "file": "model/reduced_snapshots.npz", "runs": len(cal.online_snapshots.runs),
+            "last_frame": cal.online_snapshots.last_frame, "made_at": cal.online_snapshots.made_at.as_dict()},
         "fit": {
             "method": cal.search.method if cal.search is not None else "table1",
             "objective": cal.objective,
@@ -204,6 +213,9 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
     vertices, faces = _surface(folder / "model" / "tissue_surface.npz")
     spec = ModelSpec(scene, tissue, volume if volume is not None else np.full(len(tissue), scene.particles.spacing_mm ** 3),
                      points, interval, settings, vertices, faces)
+    snapshots = folder / "model" / "reduced_snapshots.npz"
+    if snapshots.exists():
+        spec.offer_reduced(read_reduced_snapshots(snapshots))
     ref_path = folder / "observation" / "reference.npz"
     if not ref_path.is_file():
         raise InputError("no such file", ref_path)
@@ -217,6 +229,59 @@ def load_calibration(folder: str | Path) -> tuple[ModelSpec, Parameters, Referen
         raise InputError(f"unreadable frame-0 reference ({' '.join(str(exc).split())[:160]}); expected the npz "
                          "hifumotion calibrate writes (plane_*, pixel_mm, frame0_mask, rec_*)", ref_path) from None
     return spec, k, ref, meta
+
+
+#: what each saved run keeps: all the reduced model is made from (:func:`~hifumotion.reduced.model.pod_basis`)
+_RUN_ARRAYS = ("times_s", "nodes_mm", "advance_mm", "bar_force_n")
+
+
+def write_reduced_snapshots(path: Path, snapshots: ReducedSnapshots) -> None:
+    """``snapshots`` (:class:`~hifumotion.estimation.model.ReducedSnapshots`) as one npz, written atomically."""
+    import json
+
+    from hifumotion.io.files import atomic_path
+    from hifumotion.io.writers import json_text
+
+    arrays = {"made_at": np.array(json.dumps(snapshots.made_at.as_dict())), "last_frame": np.array(snapshots.last_frame),
+              "runs": np.array(len(snapshots.runs))}
+    for i, run in enumerate(snapshots.runs):
+        arrays.update({f"run{i}_{name}": np.asarray(getattr(run, name), float) for name in _RUN_ARRAYS})
+        arrays[f"run{i}_stats"] = np.array(json_text(run.stats))
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+
+def read_reduced_snapshots(path: Path) -> ReducedSnapshots:
+    """The runs :func:`write_reduced_snapshots` wrote, checked: one node count, finite motion, one
+    time per frame; an :class:`~hifumotion.errors.InputError` naming ``path`` otherwise."""
+    import json
+
+    from hifumotion.creep.integrate import CreepResult
+
+    expected = ("expected the npz hifumotion calibrate writes (made_at, last_frame, runs and each run's "
+                + ", ".join(_RUN_ARRAYS) + ", stats)")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            made_at = Parameters(**json.loads(str(z["made_at"])))
+            last, count = int(z["last_frame"]), int(z["runs"])
+            runs = []
+            for i in range(count):
+                a = {name: np.asarray(z[f"run{i}_{name}"], float) for name in _RUN_ARRAYS}
+                frames = len(a["times_s"])
+                nodes = a["nodes_mm"]
+                if (nodes.ndim != 3 or nodes.shape[0] != frames or nodes.shape[2] != 3 or a["advance_mm"].shape != (frames,)
+                        or a["bar_force_n"].shape != (frames,) or frames < 2 or not all(np.isfinite(v).all() for v in a.values())
+                        or np.any(np.diff(a["times_s"]) <= 0)):
+                    raise ValueError(f"run {i}'s arrays are not one finite motion per frame")
+                runs.append(CreepResult(a["times_s"], nodes, np.zeros((frames, 0, 3)), a["advance_mm"],
+                                        a["bar_force_n"], json.loads(str(z[f"run{i}_stats"]))))
+    except (OSError, EOFError, KeyError, TypeError, ValueError, zipfile.BadZipFile) as exc:
+        raise InputError(f"unreadable reduced model's runs ({' '.join(str(exc).split())[:160]}); {expected}", path) from None
+    if not runs or len({r.nodes_mm.shape[1] for r in runs}) != 1 or last < 1:
+        raise InputError(f"malformed reduced model's runs: {count} runs of different node counts or no frame; {expected}",
+                         path)
+    return ReducedSnapshots(made_at, last, tuple(runs))
 
 
 def _finite_or_none(values) -> list:
@@ -257,4 +322,4 @@ def _surface(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
     return vertices, faces
 
 
-__all__ = ["save_calibration", "load_calibration", "frame0_fingerprint"]
+__all__ = ["save_calibration", "load_calibration", "frame0_fingerprint", "read_reduced_snapshots", "write_reduced_snapshots"]

@@ -208,8 +208,9 @@ def holdout_physics(observation, settings, training, log_path=None, progress=Non
     from hifumotion.prediction.pipeline import predict_calibrated
 
     fit, held = holdout_split(training)
-    cal = calibrate(observation, settings.model_copy(update={"training_frames": fit}), log_path=log_path,
-                    progress=progress)
+    # no online loop runs on the hold-out's fit: its online model would be two runs for nothing
+    cal = calibrate(observation, settings.model_copy(update={"training_frames": fit, "online_model": False}),
+                    log_path=log_path, progress=progress)
     pred = predict_calibrated(cal.spec, cal.parameters, observation.reference_shape(), fit + held)
     return {f: pred.masks[f] for f in fit + held if f in pred.masks}, cal
 
