@@ -1122,8 +1122,9 @@ def test_a_coordinate_fitted_on_its_search_bound_is_not_determined():
 @pytest.mark.slow
 def test_a_saved_calibration_carries_the_online_models_runs(small_twin, tmp_path, monkeypatch):
     """The calibration runs the online loop's reduced model's two full runs over the whole series
-    and saves them: loaded, the model's reduced model is made from them, with no full run, and
-    they are the runs the spec's own snapshot scenes give when run afresh here."""
+    and saves them: loaded (or held in memory, as ``hifumotion run`` holds it), the model's reduced
+    model is made from them, with no full run, and they are the runs the spec's own snapshot
+    scenes give when run afresh here."""
     import hifumotion.reduced.build as build
     from hifumotion.config import validate_config
     from hifumotion.creep.scene_run import snapshot_run
@@ -1157,6 +1158,7 @@ def test_a_saved_calibration_carries_the_online_models_runs(small_twin, tmp_path
     # loaded, the reduced model comes from the saved runs: no full run is made for it
     monkeypatch.setattr(build, "snapshot_run", lambda *a, **kw: pytest.fail("a full run was made"))
     model = spec.reduced(k, n - 1)
+    assert cal.spec.reduced(cal.parameters, n - 1).basis.size == model.basis.size   # and so is the one in memory
     reference = build.reduced_from_runs(spec.snapshot_scenes(k, n - 1)[0], spec.voxels(), fresh,
                                         spec.settings.reduced, spec.settings.creep)
     assert model.basis.size == reference.basis.size

@@ -250,8 +250,8 @@ def _training_data(observation: Observation, s: CalibrationSettings, frames, poi
 def _online_snapshots(ev: Evaluator, model: ModelSpec, k: Parameters, observation: Observation, timings: dict,
                       tell) -> ReducedSnapshots | None:
     """Step 5: the full runs the online loop's reduced model of the fitted ``model`` around ``k``
-    is made from, over the whole series, in parallel on the cluster: saved with the calibration,
-    they spare the online loop two full runs before its first frame. A failure costs the
+    is made from, over the whole series, in parallel on the cluster: offered to ``model`` and saved
+    with the calibration, they spare the online loop two full runs before its first frame. A failure costs the
     calibration nothing: the online loop then runs them itself (said in one line)."""
     t0 = time.perf_counter()
     tell("online model", 0.0)
@@ -264,7 +264,9 @@ def _online_snapshots(ev: Evaluator, model: ModelSpec, k: Parameters, observatio
     finally:
         timings["online_model_s"] = time.perf_counter() - t0
     tell("online model", 1.0)
-    return ReducedSnapshots(k, last, tuple(runs))
+    snapshots = ReducedSnapshots(k, last, tuple(runs))
+    model.offer_reduced(snapshots)     # the calibration held in memory (hifumotion run) uses them too
+    return snapshots
 
 
 def _resolution(model: ModelSpec, parameters: Parameters, observation: Observation, frames,
