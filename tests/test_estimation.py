@@ -1189,3 +1189,6 @@ def test_saved_online_runs_that_are_not_whole_are_refused_by_name(tmp_path):
     write_reduced_snapshots(path, ReducedSnapshots(Parameters(), 4, (bad,)))
     with pytest.raises(InputError, match="one finite motion per frame"):
         read_reduced_snapshots(path)
+    write_reduced_snapshots(path, ReducedSnapshots(Parameters(), 4, ()))          # no run at all
+    with pytest.raises(InputError, match="malformed reduced model's runs"):
+        read_reduced_snapshots(path)

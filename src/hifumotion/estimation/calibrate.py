@@ -250,9 +250,10 @@ def _training_data(observation: Observation, s: CalibrationSettings, frames, poi
 def _online_snapshots(ev: Evaluator, model: ModelSpec, k: Parameters, observation: Observation, timings: dict,
                       tell) -> ReducedSnapshots | None:
     """Step 5: the full runs the online loop's reduced model of the fitted ``model`` around ``k``
-    is made from, over the whole series, in parallel on the cluster: offered to ``model`` and saved
-    with the calibration, they spare the online loop two full runs before its first frame. A failure costs the
-    calibration nothing: the online loop then runs them itself (said in one line)."""
+    is made from, over the whole series, in parallel on the cluster: offered to ``model`` and
+    saved with the calibration, they spare the online loop two full runs before its first frame.
+    A failure costs the calibration nothing: the online loop then runs them itself (said in one
+    line)."""
     t0 = time.perf_counter()
     tell("online model", 0.0)
     last = len(observation.frame_masks) - 1

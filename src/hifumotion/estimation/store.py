@@ -265,23 +265,30 @@ def read_reduced_snapshots(path: Path) -> ReducedSnapshots:
         with np.load(path, allow_pickle=False) as z:
             made_at = Parameters(**json.loads(str(z["made_at"])))
             last, count = int(z["last_frame"]), int(z["runs"])
-            runs = []
-            for i in range(count):
-                a = {name: np.asarray(z[f"run{i}_{name}"], float) for name in _RUN_ARRAYS}
-                frames = len(a["times_s"])
-                nodes = a["nodes_mm"]
-                if (nodes.ndim != 3 or nodes.shape[0] != frames or nodes.shape[2] != 3 or a["advance_mm"].shape != (frames,)
-                        or a["bar_force_n"].shape != (frames,) or frames < 2 or not all(np.isfinite(v).all() for v in a.values())
-                        or np.any(np.diff(a["times_s"]) <= 0)):
-                    raise ValueError(f"run {i}'s arrays are not one finite motion per frame")
-                runs.append(CreepResult(a["times_s"], nodes, np.zeros((frames, 0, 3)), a["advance_mm"],
-                                        a["bar_force_n"], json.loads(str(z[f"run{i}_stats"]))))
+            runs = [_saved_run(z, i, CreepResult) for i in range(count)]
     except (OSError, EOFError, KeyError, TypeError, ValueError, zipfile.BadZipFile) as exc:
-        raise InputError(f"unreadable reduced model's runs ({' '.join(str(exc).split())[:160]}); {expected}", path) from None
+        raise InputError(f"unreadable reduced model's runs ({' '.join(str(exc).split())[:160]}); {expected}",
+                         path) from None
     if not runs or len({r.nodes_mm.shape[1] for r in runs}) != 1 or last < 1:
-        raise InputError(f"malformed reduced model's runs: {count} runs of different node counts or no frame; {expected}",
-                         path)
+        raise InputError(f"malformed reduced model's runs: expected runs of one node count to a frame ≥ 1, got "
+                         f"{count} runs to frame {last}; {expected}", path)
     return ReducedSnapshots(made_at, last, tuple(runs))
+
+
+def _saved_run(z, i: int, result_type):
+    """Run ``i`` of an open ``reduced_snapshots.npz`` as a ``result_type`` (CreepResult); a
+    ValueError unless it is one finite motion per frame, its times increasing."""
+    import json
+
+    a = {name: np.asarray(z[f"run{i}_{name}"], float) for name in _RUN_ARRAYS}
+    frames, nodes = len(a["times_s"]), a["nodes_mm"]
+    whole = (frames >= 2 and nodes.ndim == 3 and nodes.shape[0] == frames and nodes.shape[2] == 3
+             and a["advance_mm"].shape == a["bar_force_n"].shape == (frames,)
+             and all(np.isfinite(v).all() for v in a.values()) and np.all(np.diff(a["times_s"]) > 0))
+    if not whole:
+        raise ValueError(f"run {i}'s arrays are not one finite motion per frame")
+    return result_type(a["times_s"], nodes, np.zeros((frames, 0, 3)), a["advance_mm"], a["bar_force_n"],
+                       json.loads(str(z[f"run{i}_stats"])))
 
 
 def _finite_or_none(values) -> list:
