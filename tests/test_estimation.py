@@ -619,6 +619,42 @@ def test_the_resolution_check_compares_displacements_from_each_runs_own_frame_0(
     assert ResolutionCheck((1000, 2000), (2.0, 1.6), growth * 0.5, 0.3, 3).resolved
 
 
+@pytest.mark.parametrize("second_off_mm, resolved", [(0.0, True), (0.5, False)])
+def test_a_finer_lattice_that_disagrees_is_checked_by_the_next_one(monkeypatch, second_off_mm, resolved):
+    """Runs whose truth is set here: the model's own lattice and the one with 4× its particles move
+    the points alike (or the 4× one by ``second_off_mm``), the 2× lattice 1 mm apart from both.
+    The 2× lattice is overruled and the check, its verdict and its parameter shift are the 4×
+    one's; without ``confirm`` the 2× lattice stands."""
+    from types import SimpleNamespace
+
+    import hifumotion.estimation.resolution as resolution
+
+    frames, points = 4, 6
+    base = np.zeros((frames, points, 3))
+    growth = np.linspace(0.0, 1.0, frames)[:, None, None] * np.array([1.0, 0.0, 0.0])
+    motion = {1000: base, 2000: base + growth, 4000: base + second_off_mm * growth}
+
+    def spec_with(n):
+        return SimpleNamespace(tissue_mm=np.zeros((n, 3)), spacing_mm=2.0 * (1000 / n) ** (1 / 3),
+                               settings=SimpleNamespace(tissue_particles=n))
+
+    monkeypatch.setattr(resolution, "replace", lambda settings, tissue_particles: tissue_particles)
+    monkeypatch.setattr(resolution, "model_spec", lambda observation, n: spec_with(n))
+    monkeypatch.setattr(resolution, "run_model", lambda spec, k, last, full: SimpleNamespace(
+        points_mm=motion[len(spec.tissue_mm)], bar_centre_mm=None))
+    monkeypatch.setattr(resolution, "residuals_mm", lambda p, data, upto, bar: p[..., 0].ravel())
+    observation = SimpleNamespace(pixel_mm=0.3)
+    jacobian = np.ones((frames * points, 1))
+    check = resolution.resolution_check(spec_with(1000), None, observation, frames - 1, data=object(),
+                                        jacobian=jacobian, names=("a",))
+    assert check.particles == (1000, 4000) and check.overruled == {"particles": 2000, "largest_mm": 1.0}
+    assert check.resolved == resolved and check.largest_mm == pytest.approx(second_off_mm)
+    # the 4× lattice's shift: −mean of its residuals' difference, the mean x-offset over frames and points
+    assert check.parameter_shift["a"] == pytest.approx(-second_off_mm * np.mean(np.linspace(0.0, 1.0, frames)))
+    alone = resolution.resolution_check(spec_with(1000), None, observation, frames - 1, confirm=False)
+    assert alone.particles == (1000, 2000) and alone.overruled is None and not alone.resolved
+
+
 def test_a_driven_bars_first_reduced_model_is_made_at_its_own_travel_at_both_friction_levels():
     """With a fitted friction and the full model's check, the first reduced model of a driven bar
     comes from full runs at the design's centre at each of the design's friction levels (the

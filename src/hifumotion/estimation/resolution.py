@@ -38,6 +38,9 @@ class ResolutionCheck:
     #: coordinate → how far the finer model's fit lies from this one (a Gauss–Newton step on the
     #: finer model's training residuals at the fit); None where no training data were given
     parameter_shift: dict | None = None
+    #: where the first finer lattice moved the points by more than a pixel and a second, finer again,
+    #: was run to decide: the first's particles and largest difference (mm); the check is the second's
+    overruled: dict | None = None
 
     @property
     def largest_mm(self) -> float:
@@ -53,7 +56,7 @@ class ResolutionCheck:
         return {"particles": list(self.particles), "spacing_mm": list(self.spacing_mm),
                 "last_frame": self.last_frame, "difference_mm": np.round(self.difference_mm, 4).tolist(),
                 "largest_mm": self.largest_mm, "pixel_mm": self.pixel_mm, "resolved": self.resolved,
-                "parameter_shift": self.parameter_shift}
+                "parameter_shift": self.parameter_shift, "overruled": self.overruled}
 
     def with_numerical_error(self, std: dict) -> dict:
         """Each coordinate's standard error ``std`` with the model's numerical error added in
@@ -89,25 +92,45 @@ def parameter_shift(jacobian: np.ndarray, residuals_mm_here: np.ndarray, residua
 
 def resolution_check(spec: ModelSpec, k: Parameters, observation, last_frame: int, factor: float = 2.0,
                      data: TrainingData | None = None, jacobian: np.ndarray | None = None,
-                     names=()) -> ResolutionCheck:
+                     names=(), confirm: bool = True) -> ResolutionCheck:
     """The fitted model ``spec`` at ``k`` on its own lattice and on one with ``factor`` times the
     particles, frames 0 … ``last_frame`` (module docstring). A reduced model is checked on the
     full model it reduces: a reduced model of the finer lattice would need its own snapshots.
+
+    With ``confirm``, where that lattice moves the points A by more than a pixel, one with
+    ``factor²`` times the particles decides, and the check is against it (the first recorded as
+    :attr:`~ResolutionCheck.overruled`). A lattice's error is not monotone in its spacing: one
+    lattice can sit badly against the sample's surface or the bar's rim. On slide_reverse_s51
+    twice the particles moved the points 0.30 mm, four and eight times 0.05 mm
+    (docs/decisions.md, "A resolution check on the fit").
 
     With the fit's training ``data``, its ``jacobian`` and its coordinates' ``names``, also how
     far the finer model would move the fit (:func:`parameter_shift`): the model's own error in
     the parameters, which the fit's standard errors do not contain."""
     if not factor > 1.0:
         raise ValueError(f"the finer lattice needs more particles: factor {factor}")
-    finer = model_spec(observation, replace(spec.settings, tissue_particles=int(round(factor * spec.settings.tissue_particles))))
-    runs = [run_model(m, k, last_frame, full=True) for m in (spec, finer)]
+    pixel_mm = float(observation.pixel_mm)
+    here = run_model(spec, k, last_frame, full=True)
+    finer, there = _finer_run(spec, k, observation, last_frame, factor)
+    difference = displacement_difference_mm(here.points_mm, there.points_mm)
+    overruled = None
+    if confirm and float(np.max(difference, initial=0.0)) > pixel_mm:
+        overruled = {"particles": len(finer.tissue_mm), "largest_mm": float(np.max(difference))}
+        finer, there = _finer_run(spec, k, observation, last_frame, factor * factor)
+        difference = displacement_difference_mm(here.points_mm, there.points_mm)
     shift = None
     if data is not None and jacobian is not None:
-        here, there = (residuals_mm(r.points_mm, data, None, r.bar_centre_mm) for r in runs)
-        shift = dict(zip(names, parameter_shift(jacobian, here, there).tolist()))
+        r_here, r_there = (residuals_mm(r.points_mm, data, None, r.bar_centre_mm) for r in (here, there))
+        shift = dict(zip(names, parameter_shift(jacobian, r_here, r_there).tolist()))
     return ResolutionCheck((len(spec.tissue_mm), len(finer.tissue_mm)), (spec.spacing_mm, finer.spacing_mm),
-                           displacement_difference_mm(*(r.points_mm for r in runs)), float(observation.pixel_mm),
-                           int(last_frame), shift)
+                           difference, pixel_mm, int(last_frame), shift, overruled)
+
+
+def _finer_run(spec: ModelSpec, k: Parameters, observation, last_frame: int, factor: float):
+    """``spec``'s model on ``factor`` times its particles, and its run at ``k`` to ``last_frame``."""
+    finer = model_spec(observation, replace(spec.settings,
+                                            tissue_particles=int(round(factor * spec.settings.tissue_particles))))
+    return finer, run_model(finer, k, last_frame, full=True)
 
 
 __all__ = ["ResolutionCheck", "displacement_difference_mm", "parameter_shift", "resolution_check"]
