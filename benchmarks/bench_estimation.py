@@ -362,7 +362,10 @@ def _tell(name: str, label: str, r: dict) -> None:
     at_text = "" if at is None else f", at the truth {at['validation']['centroid_mean_mm']:.3f} mm"
     rc = r.get("resolution_check")
     if rc is not None:
-        at_text += f", ×2 particles moves the points {rc['largest_mm']:.3f} mm"
+        over = rc.get("overruled")
+        first = "" if over is None else f" ({over['particles']:,} particles: {over['largest_mm']:.3f} mm, overruled)"
+        at_text += (f", {rc['particles'][1]:,} particles move the points {rc['largest_mm']:.3f} mm from where "
+                    f"{rc['particles'][0]:,} put them{first}")
     print(f"{name} {label}: DSC {v['dsc_mean']:.4f}/{v['dsc_min']:.4f} centroid {v['centroid_mean_mm']:.3f} mm"
           f"{at_text}, {fe_text}{r['calibration_s']:.0f} s", file=sys.stderr, flush=True)
     peers = ", ".join(f"{m} {s['dsc_mean']:.4f}/{s['centroid_mean_mm']:.3f}"
