@@ -131,7 +131,8 @@ class CalibrationSettings(ConfigModel):
                                     "parameters — fits the training frames better (both costs in parameters.json)")
     degeneracy_check: bool = Field(True, description="run and report the F–E–β1 scaling the push cannot see")
     resolution_check: bool = Field(
-        False, description="run the fitted model at the fit again on twice the particles and report how far its "
+        False, description="run the fitted model at the fit again on twice the particles (and, where that moves "
+                           "them by more than a pixel, on four times, which decides) and report how far its "
                            "points A move apart over the training frames (parameters.json → fit.resolution_check; "
                            "a warning where it is more than a pixel: the model is too coarse for the fit to be "
                            "trusted); how far the finer model would move each fitted value is added to its "
