@@ -90,7 +90,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--phantoms", type=int, default=6)
     ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--quick", action="store_true", help="a run of a few minutes: 3 phantoms of 50 frames")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.phantoms, args.frames = 3, 50
     print(json_text({"speed": speed(args.frames), "presets": presets(args.phantoms), "pymust": pymust_comparison()}, indent=2))
     return 0
 

@@ -140,7 +140,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--integrator", choices=("implicit", "explicit"), default="implicit")
+    ap.add_argument("--quick", action="store_true", help="a run of a few minutes: the small preset")
     args = ap.parse_args()
+    if args.quick:
+        args.preset = "small"
     factors = [float(f) for f in args.factors.split(",")]
     with ProcessPoolExecutor(args.workers) as pool:
         if args.integrator == "implicit":

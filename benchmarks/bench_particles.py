@@ -89,7 +89,10 @@ def main(argv=None) -> dict:
     parser.add_argument("--threads", type=int, default=None, help="Numba threads (default: all cores)")
     parser.add_argument("--json", action="store_true", help="print JSON only")
     parser.add_argument("--fast", default="1000,4399", help="tissue particles of the fast-path runs ('' for none)")
+    parser.add_argument("--quick", action="store_true", help="a run of a few minutes: 150 steps")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.steps = 150
     if args.threads:
         os.environ["NUMBA_NUM_THREADS"] = str(args.threads)
     import numba

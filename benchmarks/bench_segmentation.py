@@ -178,7 +178,10 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rows", type=Path, default=None, help="also write every per-image row to this JSON file")
     ap.add_argument("--no-cache", action="store_true", help="run every row, ignoring and replacing the cache")
+    ap.add_argument("--quick", action="store_true", help="a run of a few minutes: the first 10 images of each dataset")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.limit = 10 if args.limit is None else min(args.limit, 10)
 
     datasets = [d for d in args.datasets.split(",") if d]
     missing = [d for d in datasets if not (DATA / d / "init.json").is_file()]

@@ -31,7 +31,10 @@ def main() -> None:
     ap.add_argument("--spacings", default="1.0,0.5", help="Δx in mm")
     ap.add_argument("--youngs-modulus-pa", type=float, default=1e5)
     ap.add_argument("--poisson-ratio", type=float, default=0.3)
+    ap.add_argument("--quick", action="store_true", help="a run of a few minutes: the 1 mm spacing only")
     args = ap.parse_args()
+    if args.quick:
+        args.spacings = "1.0"
     r_mm, e, nu = args.radius_mm, args.youngs_modulus_pa, args.poisson_ratio
     delta = 0.04 * r_mm * 1e-3
     force = 4 / 3 * e / (1 - nu ** 2) * math.sqrt(r_mm * 1e-3) * delta ** 1.5

@@ -140,7 +140,10 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default=DEFAULT_METHODS)
     ap.add_argument("--twins", default=",".join(TWINS))
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--quick", action="store_true", help="a run of a few minutes: GLCV and GAC only")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.methods = "glcv,gac"
     from hifumotion.segmentation import METHODS
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]

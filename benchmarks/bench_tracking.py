@@ -59,7 +59,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--method", default="glcv")
+    ap.add_argument("--quick", action="store_true", help="a run of a few minutes: the first 60 frames")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.frames = min(args.frames, 60)
 
     images, masks = cine(args.frames)
     init = Ellipse(120, 128, 38, 36, 0)

@@ -59,7 +59,10 @@ def main(argv=None) -> dict:
     parser.add_argument("--skip", nargs="*", default=[], choices=["generate", "resolution", "mass_scaling"])
     parser.add_argument("--scaling-divisor", type=float, default=4.0)
     parser.add_argument("--json", action="store_true", help="print JSON only")
+    parser.add_argument("--quick", action="store_true", help="a run of a few minutes: the small preset")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.preset = "small"
 
     from hifumotion.experiment import generate_twin, twin_config
     from hifumotion.experiment import imaging as im

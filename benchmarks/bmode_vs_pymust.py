@@ -88,7 +88,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scatterers", type=int, default=8000, help="PyMUST scatterers (its run time grows with them)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quick", action="store_true", help="a run of a few minutes: 4,000 scatterers")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.scatterers = min(args.scatterers, 4000)
     try:
         import pymust  # noqa: F401
     except ImportError:

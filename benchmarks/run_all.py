@@ -1,6 +1,6 @@
 """Run every benchmark, one after the other (never two at once: 2 cores), and print one JSON.
 
-    python benchmarks/run_all.py                 # the quick settings of each (about 20–30 min)
+    python benchmarks/run_all.py                 # each with --quick (a few minutes each)
     python benchmarks/run_all.py --full          # each benchmark's own defaults (hours)
     python benchmarks/run_all.py --only bench_tracking bench_bmode
 
@@ -22,20 +22,12 @@ from hifumotion.io.writers import json_text
 
 HERE = Path(__file__).resolve().parent
 
-#: Benchmark → the arguments of a quick run (the full run uses each script's defaults).
-QUICK = {
-    "bench_tracking": ["--frames", "60"],
-    "bench_real_tracking": ["--quick"],
-    "bench_observation": ["--quick"],
-    "bench_bmode": ["--phantoms", "3", "--frames", "50"],
-    "bench_particles": ["--steps", "150", "--json"],
-    "bench_segmentation": ["--limit", "10"],
-    "bench_sweep": ["--methods", "glcv,gac"],
-    "bench_twin": ["--preset", "small", "--json"],
-    "bench_convergence": ["--preset", "small"],
-    "bench_estimation": ["--preset", "small", "--modes", "glcv"],
-    "bmode_vs_pymust": [],
-}
+#: The benchmarks a run makes, in order; each takes ``--quick`` (a run of a few minutes). Those that
+#: need a twin folder of their own (bench_forward_truth, bench_twin_truth, bench_truth_convergence)
+#: are run by hand.
+BENCHMARKS = ["bench_tracking", "bench_real_tracking", "bench_observation", "bench_bmode", "bench_particles",
+              "bench_segmentation", "bench_sweep", "bench_twin", "bench_convergence", "bench_estimation",
+              "bench_online", "bench_fe_reference", "bench_sphere_between_plates", "bmode_vs_pymust"]
 
 
 def last_json(text: str):
@@ -57,13 +49,13 @@ def main() -> None:
     ap.add_argument("--full", action="store_true", help="each benchmark's own (long) defaults")
     ap.add_argument("--only", nargs="*", default=None, help="names of the benchmarks to run")
     args = ap.parse_args()
-    names = args.only or list(QUICK)
-    unknown = [n for n in names if n not in QUICK]
+    names = args.only or list(BENCHMARKS)
+    unknown = [n for n in names if n not in BENCHMARKS]
     if unknown:
-        sys.exit(f"error: unknown benchmark(s) {unknown}; choose from {', '.join(QUICK)}")
+        sys.exit(f"error: unknown benchmark(s) {unknown}; choose from {', '.join(BENCHMARKS)}")
     results = {}
     for name in names:
-        cmd = [sys.executable, str(HERE / f"{name}.py"), *([] if args.full else QUICK[name])]
+        cmd = [sys.executable, str(HERE / f"{name}.py"), *([] if args.full else ["--quick"])]
         print(f"running {name} …", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True)
