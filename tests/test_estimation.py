@@ -2,6 +2,7 @@
 
 import io
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -1227,4 +1228,8 @@ def test_saved_online_runs_that_are_not_whole_are_refused_by_name(tmp_path):
         read_reduced_snapshots(path)
     write_reduced_snapshots(path, ReducedSnapshots(Parameters(), 4, ()))          # no run at all
     with pytest.raises(InputError, match="malformed reduced model's runs"):
+        read_reduced_snapshots(path)
+    path.unlink()
+    os.mkfifo(path)                               # refused at once, not waited on
+    with pytest.raises(InputError, match="not a regular file"):
         read_reduced_snapshots(path)

@@ -258,7 +258,9 @@ def read_reduced_snapshots(path: Path) -> ReducedSnapshots:
     import json
 
     from hifumotion.creep.integrate import CreepResult
+    from hifumotion.io.files import require_regular_file
 
+    require_regular_file(path, "npz of the reduced model's runs")     # a FIFO would hang np.load
     expected = ("expected the npz hifumotion calibrate writes (made_at, last_frame, runs and each run's "
                 + ", ".join(_RUN_ARRAYS) + ", stats)")
     try:
@@ -315,8 +317,11 @@ def _check_series(meta: dict, interval_s: float, path: Path) -> None:
 
 def _surface(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The model's surface (vertices mm, faces) from ``path``; (None, None) when there is none."""
-    if not path.exists():
+    from hifumotion.io.files import require_regular_file
+
+    if not path.exists() and not path.is_symlink():
         return None, None
+    require_regular_file(path, "npz of the model's surface")          # a FIFO would hang np.load
     try:
         with np.load(path) as z:
             vertices, faces = np.asarray(z["vertices_mm"], float), np.asarray(z["faces"], np.int64)
