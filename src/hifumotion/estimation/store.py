@@ -20,6 +20,7 @@
 
 from __future__ import annotations
 
+import json
 import zipfile
 from dataclasses import asdict
 from pathlib import Path
@@ -28,7 +29,7 @@ import numpy as np
 
 from hifumotion.errors import InputError
 from hifumotion.estimation.model import ModelSettings, ModelSpec, Parameters, ReducedSnapshots
-from hifumotion.io.files import write_text
+from hifumotion.io.files import atomic_path, require_regular_file, write_text
 from hifumotion.io.structured import read_structured
 from hifumotion.scene import Plane
 from hifumotion.estimation.reference import ReferenceShape
@@ -68,7 +69,6 @@ def save_calibration(cal, folder: str | Path, observed_dir: str | Path | None = 
 def _write_model(cal, folder: Path) -> None:
     """The fitted scene, its particles, the points A and the surface its voxels conform to."""
     from hifumotion.config import dump_toml
-    from hifumotion.io.files import atomic_path
 
     spec = cal.spec
     scene = spec.scene.model_copy(deep=True)
@@ -94,7 +94,6 @@ def _write_model(cal, folder: Path) -> None:
 def _write_observation(obs, folder: Path) -> None:
     """Frame 0's reference shape, the tracked frames' masks (and material points), the sweep's
     masks and the reconstruction."""
-    from hifumotion.io.files import atomic_path
     from hifumotion.io.writers import write_png_stack
 
     rec = obs.reconstruction
@@ -237,9 +236,6 @@ _RUN_ARRAYS = ("times_s", "nodes_mm", "advance_mm", "bar_force_n")
 
 def write_reduced_snapshots(path: Path, snapshots: ReducedSnapshots) -> None:
     """``snapshots`` (:class:`~hifumotion.estimation.model.ReducedSnapshots`) as one npz, written atomically."""
-    import json
-
-    from hifumotion.io.files import atomic_path
     from hifumotion.io.writers import json_text
 
     arrays = {"made_at": np.array(json.dumps(snapshots.made_at.as_dict())), "last_frame": np.array(snapshots.last_frame),
@@ -255,10 +251,7 @@ def write_reduced_snapshots(path: Path, snapshots: ReducedSnapshots) -> None:
 def read_reduced_snapshots(path: Path) -> ReducedSnapshots:
     """The runs :func:`write_reduced_snapshots` wrote, checked: one node count, finite motion, one
     time per frame; an :class:`~hifumotion.errors.InputError` naming ``path`` otherwise."""
-    import json
-
     from hifumotion.creep.integrate import CreepResult
-    from hifumotion.io.files import require_regular_file
 
     require_regular_file(path, "npz of the reduced model's runs")     # a FIFO would hang np.load
     expected = ("expected the npz hifumotion calibrate writes (made_at, last_frame, runs and each run's "
@@ -280,8 +273,6 @@ def read_reduced_snapshots(path: Path) -> ReducedSnapshots:
 def _saved_run(z, i: int, result_type):
     """Run ``i`` of an open ``reduced_snapshots.npz`` as a ``result_type`` (CreepResult); a
     ValueError unless it is one finite motion per frame, its times increasing."""
-    import json
-
     a = {name: np.asarray(z[f"run{i}_{name}"], float) for name in _RUN_ARRAYS}
     frames, nodes = len(a["times_s"]), a["nodes_mm"]
     whole = (frames >= 2 and nodes.ndim == 3 and nodes.shape[0] == frames and nodes.shape[2] == 3
@@ -317,8 +308,6 @@ def _check_series(meta: dict, interval_s: float, path: Path) -> None:
 
 def _surface(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The model's surface (vertices mm, faces) from ``path``; (None, None) when there is none."""
-    from hifumotion.io.files import require_regular_file
-
     if not path.exists() and not path.is_symlink():
         return None, None
     require_regular_file(path, "npz of the model's surface")          # a FIFO would hang np.load
